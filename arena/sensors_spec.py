@@ -1,0 +1,90 @@
+"""Names, shapes and DeepRacer spellings of the sensors a car can carry."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from gymnasium import spaces
+from pydantic import BaseModel, ConfigDict, Field
+
+SensorName = Literal["camera", "stereo", "lidar", "sector_lidar", "discretized_sector_lidar"]
+SENSOR_NAMES: tuple[str, ...] = (
+    "camera",
+    "stereo",
+    "lidar",
+    "sector_lidar",
+    "discretized_sector_lidar",
+)
+DEEPRACER_SENSOR = {
+    "camera": "FRONT_FACING_CAMERA",
+    "stereo": "STEREO_CAMERAS",
+    "lidar": "LIDAR",
+    "sector_lidar": "SECTOR_LIDAR",
+    "discretized_sector_lidar": "DISCRETIZED_SECTOR_LIDAR",
+}
+FROM_DEEPRACER_SENSOR = {v: k for k, v in DEEPRACER_SENSOR.items()}
+
+CAMERA_HEIGHT = 120
+CAMERA_WIDTH = 160
+LIDAR_BEAMS = 64
+LIDAR_FOV_DEG = 300.0
+LIDAR_MIN_RANGE = 0.15
+LIDAR_MAX_RANGE = 12.0
+LIDAR_CLIP = 1.0
+LIDAR_NOISE_STD = 0.01
+SECTOR_THRESHOLD = 0.5
+
+
+class LidarConfig(BaseModel):
+    """DeepRacer's ``lidar_config`` for the sector lidars."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    num_sectors: int = Field(default=8, ge=1, le=64)
+    num_values_per_sector: int = Field(default=8, ge=1, le=64)
+    clipping_dist: float = Field(default=2.0, gt=0.0, le=LIDAR_MAX_RANGE)
+
+
+def check_sensors(sensors: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+    """Validate a sensor combination; returns it as a tuple in canonical order.
+
+    At least one sensor; at most one camera (``camera`` or ``stereo``) and at most one
+    lidar kind. Raises ``ValueError`` with a message naming the problem.
+    """
+    names = tuple(sensors)
+    if not names:
+        raise ValueError("a car needs at least one sensor")
+    unknown = [s for s in names if s not in SENSOR_NAMES]
+    if unknown:
+        raise ValueError(f"unknown sensor(s) {unknown}; choose from {list(SENSOR_NAMES)}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"sensor listed twice in {list(names)}")
+    if "camera" in names and "stereo" in names:
+        raise ValueError("choose one of 'camera' and 'stereo', not both")
+    lidars = [s for s in names if "lidar" in s]
+    if len(lidars) > 1:
+        raise ValueError(f"choose one lidar kind, got {lidars}")
+    return tuple(s for s in SENSOR_NAMES if s in names)
+
+
+def sensor_space(name: str, lidar: LidarConfig | None = None) -> spaces.Space:
+    """The observation space of one sensor."""
+    lidar = lidar or LidarConfig()
+    if name == "camera":
+        return spaces.Box(0, 255, (CAMERA_HEIGHT, CAMERA_WIDTH, 1), dtype=np.uint8)
+    if name == "stereo":
+        return spaces.Box(0, 255, (CAMERA_HEIGHT, CAMERA_WIDTH, 2), dtype=np.uint8)
+    if name == "lidar":
+        return spaces.Box(LIDAR_MIN_RANGE, LIDAR_CLIP, (LIDAR_BEAMS,), dtype=np.float32)
+    if name == "sector_lidar":
+        return spaces.Box(0.0, 1.0, (lidar.num_sectors,), dtype=np.float32)
+    if name == "discretized_sector_lidar":
+        size = lidar.num_sectors * lidar.num_values_per_sector
+        return spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
+    raise ValueError(f"unknown sensor {name!r}; choose from {list(SENSOR_NAMES)}")
+
+
+def observation_space(sensors: tuple[str, ...], lidar: LidarConfig | None = None) -> spaces.Dict:
+    """A car's observation space: a Dict with one entry per sensor."""
+    return spaces.Dict({name: sensor_space(name, lidar) for name in check_sensors(sensors)})

@@ -1,0 +1,153 @@
+"""Vectorised planar geometry on polylines: projection, point-in-polygon, intersections.
+
+Every function takes many points at once as an ``(P, 2)`` array; the arena calls
+these every control step for every car and wheel, so nothing here loops in Python
+over points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+EPS = 1e-12
+
+
+@dataclass(frozen=True)
+class PolylineProjection:
+    """Closest points of many query points on one polyline.
+
+    Attributes:
+        segment: index ``i`` of the segment ``(vertices[i], vertices[i + 1])`` holding
+            the closest point, shape ``(P,)``.
+        fraction: position of the closest point along that segment in ``[0, 1]``.
+        arc_length: distance along the polyline from ``vertices[0]`` to the closest point.
+        offset: signed distance to the closest point, positive on the left of the
+            polyline's direction of travel.
+        distance: unsigned distance to the closest point (``abs(offset)``).
+        closest: the closest points themselves, shape ``(P, 2)``.
+    """
+
+    segment: np.ndarray
+    fraction: np.ndarray
+    arc_length: np.ndarray
+    offset: np.ndarray
+    distance: np.ndarray
+    closest: np.ndarray
+
+
+def as_points(points: np.ndarray | list | tuple) -> np.ndarray:
+    """Return ``points`` as a float ``(P, 2)`` array (a single point becomes ``(1, 2)``)."""
+    arr = np.asarray(points, dtype=float)
+    if arr.ndim == 1:
+        arr = arr.reshape(1, -1)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"expected points of shape (P, 2), got {arr.shape}")
+    return arr
+
+
+def cumulative_length(vertices: np.ndarray) -> np.ndarray:
+    """Arc length at each vertex of a polyline, starting at 0."""
+    seg = np.linalg.norm(np.diff(vertices, axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+def project_onto_polyline(
+    points: np.ndarray, vertices: np.ndarray, cum_length: np.ndarray | None = None
+) -> PolylineProjection:
+    """Project points onto the polyline through ``vertices`` (no wrap-around).
+
+    Ties between equally close segments go to the lower segment index, so results are
+    deterministic. Cost is ``O(P * S)`` in memory and time, with ``S`` segments.
+    """
+    pts = as_points(points)
+    a = vertices[:-1]
+    d = vertices[1:] - a
+    seg_len2 = np.einsum("ij,ij->i", d, d)
+    rel = pts[:, None, :] - a[None, :, :]
+    t = np.einsum("psk,sk->ps", rel, d) / np.maximum(seg_len2, EPS)
+    np.clip(t, 0.0, 1.0, out=t)
+    diff = rel - t[..., None] * d[None, :, :]
+    dist2 = np.einsum("psk,psk->ps", diff, diff)
+    seg = np.argmin(dist2, axis=1)
+    rows = np.arange(len(pts))
+    frac = t[rows, seg]
+    seg_d = d[seg]
+    closest = a[seg] + frac[:, None] * seg_d
+    if cum_length is None:
+        cum_length = cumulative_length(vertices)
+    seg_len = np.sqrt(seg_len2[seg])
+    arc = cum_length[seg] + frac * seg_len
+    to_point = pts - closest
+    cross = seg_d[:, 0] * to_point[:, 1] - seg_d[:, 1] * to_point[:, 0]
+    distance = np.sqrt(dist2[rows, seg])
+    offset = np.where(cross >= 0.0, distance, -distance)
+    return PolylineProjection(seg, frac, arc, offset, distance, closest)
+
+
+def crossings(points: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    """Count how often a ray from each point towards +x crosses the closed ``ring``.
+
+    ``ring`` is ``(M, 2)``; the edge from the last vertex back to the first is implied.
+    Used for even-odd inside tests of polygons with holes.
+    """
+    pts = as_points(points)
+    a = ring
+    b = np.roll(ring, -1, axis=0)
+    px = pts[:, 0:1]
+    py = pts[:, 1:2]
+    ay, by = a[None, :, 1], b[None, :, 1]
+    straddles = (ay > py) != (by > py)
+    denom = np.where(by - ay == 0.0, EPS, by - ay)
+    x_at = a[None, :, 0] + (py - ay) * (b[None, :, 0] - a[None, :, 0]) / denom
+    return np.count_nonzero(straddles & (px < x_at), axis=1)
+
+
+def inside_rings(points: np.ndarray, rings: list[np.ndarray]) -> np.ndarray:
+    """Even-odd inside test of points against the region bounded by several rings."""
+    total = sum(crossings(points, ring) for ring in rings)
+    return (np.asarray(total) % 2) == 1
+
+
+def segments_intersect(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """Whether segments ``p1-p2`` and ``q1-q2`` properly intersect (broadcasting)."""
+
+    def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+        v = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
+            c[..., 0] - a[..., 0]
+        )
+        return np.sign(np.where(np.abs(v) < 1e-12, 0.0, v))
+
+    o1 = orient(p1, p2, q1)
+    o2 = orient(p1, p2, q2)
+    o3 = orient(q1, q2, p1)
+    o4 = orient(q1, q2, p2)
+    return (o1 * o2 < 0) & (o3 * o4 < 0)
+
+
+def first_self_intersection(vertices: np.ndarray, closed: bool) -> tuple[int, int] | None:
+    """Return the first pair of non-adjacent segments of a polyline that cross, if any."""
+    a = vertices[:-1]
+    b = vertices[1:]
+    n = len(a)
+    hit = segments_intersect(a[:, None], b[:, None], a[None, :], b[None, :])
+    i, j = np.triu_indices(n, k=2)
+    mask = hit[i, j]
+    if closed:
+        mask &= ~((i == 0) & (j == n - 1))
+    if not mask.any():
+        return None
+    k = int(np.argmax(mask))
+    return int(i[k]), int(j[k])
+
+
+def signed_area(ring: np.ndarray) -> float:
+    """Shoelace area of a ring: positive when its vertices run counter-clockwise."""
+    x, y = ring[:, 0], ring[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
+    """Wrap radians into ``(-pi, pi]``."""
+    return np.pi - np.mod(np.pi - np.asarray(angle), 2.0 * np.pi)
