@@ -111,7 +111,7 @@ def inside_rings(points: np.ndarray, rings: list[np.ndarray]) -> np.ndarray:
 
 
 def segments_intersect(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
-    """Whether segments ``p1-p2`` and ``q1-q2`` properly intersect (broadcasting)."""
+    """Whether segments ``p1-p2`` and ``q1-q2`` cross or touch (broadcasting)."""
 
     def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
         v = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
@@ -123,7 +123,16 @@ def segments_intersect(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.nd
     o2 = orient(p1, p2, q2)
     o3 = orient(q1, q2, p1)
     o4 = orient(q1, q2, p2)
-    return (o1 * o2 < 0) & (o3 * o4 < 0)
+    crossing = (o1 * o2 <= 0) & (o3 * o4 <= 0)
+    collinear = (o1 == 0) & (o2 == 0)
+    overlap = np.ones_like(crossing)
+    for k in (0, 1):
+        lo_p = np.minimum(p1[..., k], p2[..., k])
+        hi_p = np.maximum(p1[..., k], p2[..., k])
+        lo_q = np.minimum(q1[..., k], q2[..., k])
+        hi_q = np.maximum(q1[..., k], q2[..., k])
+        overlap &= (lo_p <= hi_q) & (lo_q <= hi_p)
+    return crossing & (~collinear | overlap)
 
 
 def first_self_intersection(vertices: np.ndarray, closed: bool) -> tuple[int, int] | None:

@@ -170,6 +170,7 @@ def write_document(track: Track, path: str | Path) -> Path:
 def read_track(path: str | Path, name: str | None = None) -> Track:
     """Load any supported track file, chosen by suffix."""
     path = Path(path)
+    _check_file(path)
     suffix = path.suffix.lower()
     if suffix == ".npy":
         return read_npy(path, name)

@@ -231,15 +231,15 @@ class Track:
         proj = project_onto_polyline(points, self.waypoints, self._cum)
         i, f = proj.segment, proj.fraction
         width = self.widths[i] * (1.0 - f) + self.widths[i + 1] * f
-        progress = 100.0 * proj.arc_length / self.length
+        arc = np.mod(proj.arc_length, self.length) if self.is_loop else proj.arc_length
         return Projection(
-            arc_length=proj.arc_length,
+            arc_length=arc,
             segment=i,
             fraction=f,
             offset=proj.offset,
             distance_from_center=proj.distance,
             track_width=width,
-            progress=progress,
+            progress=100.0 * arc / self.length,
         )
 
     def contains(self, points: np.ndarray) -> np.ndarray:

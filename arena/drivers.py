@@ -1,0 +1,92 @@
+"""Simple non-learning drivers: pure pursuit along a lane at a set speed.
+
+``LaneFollower`` steers the bot cars of head-to-bot races and is the built-in ``bot``
+driver of ``slipstream race``; :class:`LaneFollowerPolicy` wraps it in the ``Policy``
+protocol for a controlled car (it reads the DeepRacer params, not the sensors).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from arena.actions import ContinuousActionSpace, DiscreteActionSpace
+from tracks.track import Track
+
+WHEELBASE = 0.164
+MAX_STEER_DEG = 30.0
+
+
+class LaneFollower:
+    """Pure pursuit on a lateral offset from the centre line.
+
+    Args:
+        track: the track (in its driving direction).
+        speed: target speed, m/s.
+        lookahead: pursuit distance along the track, metres.
+    """
+
+    def __init__(self, track: Track, speed: float, lookahead: float = 0.6) -> None:
+        self.track = track
+        self.speed = speed
+        self.lookahead = lookahead
+        self.offset = 0.0
+
+    def command(self, x: float, y: float, yaw: float) -> tuple[float, float]:
+        """``(steering_deg, speed)`` towards the lane point ``lookahead`` metres ahead."""
+        arc = float(self.track.project(np.array([[x, y]])).arc_length[0])
+        pos, heading = self.track.pose_at(np.array([arc + self.lookahead]))
+        normal = np.array([-math.sin(heading[0]), math.cos(heading[0])])
+        target = pos[0] + self.offset * normal
+        dx, dy = target[0] - x, target[1] - y
+        alpha = math.atan2(dy, dx) - yaw
+        dist = max(math.hypot(dx, dy), 1e-6)
+        steer = math.degrees(math.atan2(2.0 * WHEELBASE * math.sin(alpha), dist))
+        return float(np.clip(steer, -MAX_STEER_DEG, MAX_STEER_DEG)), self.speed
+
+
+def nearest_action(
+    space: DiscreteActionSpace | ContinuousActionSpace, steer: float, speed: float
+) -> Any:
+    """The action of ``space`` closest to the command ``(steer, speed)``."""
+    if isinstance(space, DiscreteActionSpace):
+        costs = [
+            ((a.steering_angle - steer) / 30.0) ** 2 + ((a.speed - speed) / 4.0) ** 2
+            for a in space.actions
+        ]
+        return int(np.argmin(costs))
+    s, v = space.steering_angle, space.speed
+    a0 = 2.0 * (steer - s.low) / (s.high - s.low) - 1.0
+    a1 = 2.0 * (speed - v.low) / (v.high - v.low) - 1.0
+    return np.clip(np.array([a0, a1], dtype=np.float32), -1.0, 1.0)
+
+
+class LaneFollowerPolicy:
+    """A ``Policy`` that follows the centre line at a set speed (needs the race params)."""
+
+    needs_params = True
+
+    def __init__(
+        self,
+        track: Track,
+        space: DiscreteActionSpace | ContinuousActionSpace,
+        speed: float | None = None,
+    ) -> None:
+        self.space = space
+        self.follower = LaneFollower(track, speed if speed is not None else space.max_speed)
+
+    def reset(self) -> None:
+        """Stateless."""
+
+    def act(self, observation: dict[str, Any], params: dict[str, Any] | None = None) -> Any:
+        """Steer from the model point and heading in ``params``."""
+        if params is None:
+            raise ValueError("LaneFollowerPolicy needs the race params")
+        yaw = math.radians(params["heading"])
+        # params give the model point; pursue from the rear axle, 0.14 m behind it.
+        x = params["x"] - 0.14 * math.cos(yaw)
+        y = params["y"] - 0.14 * math.sin(yaw)
+        steer, speed = self.follower.command(x, y, yaw)
+        return nearest_action(self.space, steer, speed)
