@@ -135,7 +135,9 @@ def default_discrete_space() -> DiscreteActionSpace:
     )
 
 
-def from_deepracer_metadata(metadata: dict[str, Any]) -> DiscreteActionSpace | ContinuousActionSpace:
+def from_deepracer_metadata(
+    metadata: dict[str, Any],
+) -> DiscreteActionSpace | ContinuousActionSpace:
     """Read the action space from DeepRacer's ``model_metadata.json`` keys."""
     kind = str(metadata.get("action_space_type", "discrete")).lower()
     raw = metadata.get("action_space")

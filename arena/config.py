@@ -182,7 +182,9 @@ def describe_validation_error(exc: ValidationError) -> str:
     errors = exc.errors()
     failing = [e["loc"] for e in errors if e["type"] != "too_short"]
     for err in errors:
-        if err["type"] == "too_short" and any(loc[: len(err["loc"])] == err["loc"] for loc in failing):
+        if err["type"] == "too_short" and any(
+            loc[: len(err["loc"])] == err["loc"] for loc in failing
+        ):
             continue  # pydantic's echo of an invalid item, not a separate problem
         where = ".".join(str(p) for p in err["loc"] if not str(p).startswith(("discrete", "cont")))
         msg = err["msg"].removeprefix("Value error, ")

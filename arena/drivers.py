@@ -26,21 +26,22 @@ class LaneFollower:
         track: the track (in its driving direction).
         speed: target speed, m/s.
         lookahead: pursuit distance along the track, metres.
+        lane: 'center', 'inner', 'outer' or a lateral offset in metres (left positive).
     """
 
-    def __init__(self, track: Track, speed: float, lookahead: float = 0.6) -> None:
+    def __init__(
+        self, track: Track, speed: float, lookahead: float = 0.6, lane: str | float = "center"
+    ) -> None:
         self.track = track
         self.speed = speed
         self.lookahead = lookahead
-        self.offset = 0.0
+        self.lane = lane
 
     def command(self, x: float, y: float, yaw: float) -> tuple[float, float]:
         """``(steering_deg, speed)`` towards the lane point ``lookahead`` metres ahead."""
         arc = float(self.track.project(np.array([[x, y]])).arc_length[0])
-        pos, heading = self.track.pose_at(np.array([arc + self.lookahead]))
-        normal = np.array([-math.sin(heading[0]), math.cos(heading[0])])
-        target = pos[0] + self.offset * normal
-        dx, dy = target[0] - x, target[1] - y
+        target, _ = self.track.pose_at(np.array([arc + self.lookahead]), self.lane)
+        dx, dy = target[0, 0] - x, target[0, 1] - y
         alpha = math.atan2(dy, dx) - yaw
         dist = max(math.hypot(dx, dy), 1e-6)
         steer = math.degrees(math.atan2(2.0 * WHEELBASE * math.sin(alpha), dist))

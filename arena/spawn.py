@@ -80,18 +80,18 @@ def obstacle_places(
     return [(place(track, arc0 + a, lane), lane) for a, lane in zip(arcs, lanes, strict=True)]
 
 
-def bot_places(count: int, min_gap: float, track: Track, arc0: float) -> list[Placement]:
-    """Bots spread evenly ahead of the start on alternating lanes."""
+def bot_places(
+    count: int, min_gap: float, track: Track, arc0: float
+) -> list[tuple[Placement, str]]:
+    """Bots spread evenly ahead of the start on alternating lanes (with their lane)."""
     spacing = track.length / (count + 1)
     if spacing < min_gap:
         raise ConfigError(
             f"{count} bots need {min_gap * (count + 1):.1f} m of track; "
             f"{track.name} is {track.length:.1f} m"
         )
-    return [
-        place(track, arc0 + (j + 1) * spacing, "outer" if j % 2 == 0 else "inner")
-        for j in range(count)
-    ]
+    lanes = ["outer" if j % 2 == 0 else "inner" for j in range(count)]
+    return [(place(track, arc0 + (j + 1) * spacing, lanes[j]), lanes[j]) for j in range(count)]
 
 
 def _other(lane: str) -> str:

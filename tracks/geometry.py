@@ -110,7 +110,9 @@ def inside_rings(points: np.ndarray, rings: list[np.ndarray]) -> np.ndarray:
     return (np.asarray(total) % 2) == 1
 
 
-def segments_intersect(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+def segments_intersect(
+    p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray
+) -> np.ndarray:
     """Whether segments ``p1-p2`` and ``q1-q2`` cross or touch (broadcasting)."""
 
     def orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:

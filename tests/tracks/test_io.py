@@ -108,7 +108,7 @@ def test_not_a_file_and_missing_file(tmp_path: Path) -> None:
 def test_garbage_and_pickled_npy_are_refused(tmp_path: Path) -> None:
     garbage = tmp_path / "garbage.npy"
     garbage.write_bytes(b"\x93NUMPY this is not really numpy" * 3)
-    with pytest.raises(TrackFileError, match="garbage.npy"):
+    with pytest.raises(TrackFileError, match=r"garbage\.npy"):
         read_track(garbage)
     pickled = tmp_path / "pickled.npy"
     np.save(pickled, np.array([{"a": 1}], dtype=object), allow_pickle=True)
@@ -122,7 +122,10 @@ def test_garbage_and_pickled_npy_are_refused(tmp_path: Path) -> None:
         ([1, 2, 3], "mapping"),
         ({"name": "x"}, "missing field"),
         ({"name": "x", "centerline": "abc", "left_border": [], "right_border": []}, "centerline"),
-        ({"name": "x", "version": 7, "centerline": [], "left_border": [], "right_border": []}, "version"),
+        (
+            {"name": "x", "version": 7, "centerline": [], "left_border": [], "right_border": []},
+            "version",
+        ),
         ({"name": "", "centerline": [], "left_border": [], "right_border": []}, "name"),
     ],
 )

@@ -1,0 +1,539 @@
+"""``RacingEnv``: several cars racing on a track, as a PettingZoo ``ParallelEnv``.
+
+One PyBullet DIRECT client per env; the world is rebuilt on every ``reset`` so that a
+(config, seed, actions) triple always gives the same trajectory. Each control step:
+actions become steering and wheel-speed commands, physics runs its substeps, the
+rules judge every car (see :mod:`arena.rules`), penalised cars are frozen and then
+respawned (race mode), and each car gets its sensors' observation, its reward from
+its ``reward_function(params)`` and an info dict carrying the DeepRacer ``params``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from arena import world
+from arena.camera import Box3D, CameraRenderer
+from arena.car import Car, CarSpec
+from arena.config import ConfigError, RaceConfig
+from arena.drivers import LaneFollower
+from arena.lidar import Lidar, clip_lidar, discretized_sector_lidar, sector_lidar
+from arena.params import ObjectsView, build_params, check_reward
+from arena.rewards import follow_center_line
+from arena.rules import CarRecord, EpisodeStatus, Measurement, RuleBook
+from arena.sensors_spec import observation_space
+from arena.spawn import Placement, bot_places, car_grid, obstacle_places, respawn_place, start_arc
+from tracks.catalog import get_track
+from tracks.track import Track
+
+RewardFunction = Callable[[dict[str, Any]], float]
+CAR_COLORS = [
+    (0.85, 0.1, 0.1, 1.0),
+    (0.1, 0.35, 0.9, 1.0),
+    (0.1, 0.7, 0.2, 1.0),
+    (0.9, 0.75, 0.1, 1.0),
+    (0.6, 0.2, 0.8, 1.0),
+    (0.1, 0.75, 0.75, 1.0),
+    (0.95, 0.5, 0.1, 1.0),
+    (0.5, 0.5, 0.5, 1.0),
+]
+BOT_COLOR = (0.15, 0.15, 0.15, 1.0)
+CAR_GRAY, BOT_GRAY, BOX_GRAY = 90, 40, 200
+PARK_DISTANCE = 1000.0
+
+
+@dataclass
+class _Obstacle:
+    body: int
+    place: Placement
+    lane: str
+    size: tuple[float, float, float]
+
+
+@dataclass
+class _Bot:
+    car: Car
+    driver: LaneFollower
+    next_change: float
+
+
+@dataclass
+class _Live:
+    """One controlled car's simulation objects and last measurements."""
+
+    car: Car
+    record: CarRecord
+    command: tuple[float, float] = (0.0, 0.0)
+    hold: Placement | None = None
+    last_point: np.ndarray | None = None
+    parked: bool = False
+
+
+def resolve_track(config: RaceConfig) -> tuple[Track, bool]:
+    """The config's track in its race direction, and whether that reverses the file."""
+    native = get_track(config.track)
+    return native.with_direction(config.direction), native.direction != config.direction
+
+
+class RacingEnv(ParallelEnv):
+    """DeepRacer-style racing for 1-8 controlled cars (PettingZoo parallel API).
+
+    Args:
+        config: the race (track, rules, cars, seed).
+        reward_functions: one ``reward_function(params) -> float`` for every car, or a
+            mapping from car name to its function; defaults to following the centre line.
+        render_mode: ``None`` or ``"rgb_array"`` (a top-down picture of the race).
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {
+        "name": "slipstream_racing_v0",
+        "render_modes": ["rgb_array"],
+        "render_fps": 15,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        config: RaceConfig,
+        reward_functions: RewardFunction | Mapping[str, RewardFunction] | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ConfigError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        self.config = config
+        self.render_mode = render_mode
+        self.track, self.is_reversed = resolve_track(config)
+        self.possible_agents = [car.name for car in config.cars]
+        self.agents: list[str] = []
+        self._car_configs = {car.name: car for car in config.cars}
+        self._rewards = self._reward_table(reward_functions)
+        self._obs_spaces = {
+            c.name: observation_space(c.sensors, c.lidar_config) for c in config.cars
+        }
+        self._act_spaces = {c.name: c.action_space.gym_space() for c in config.cars}
+        self._physics = world.PhysicsSettings(
+            control_hz=config.physics.control_hz, physics_hz=config.physics.physics_hz
+        )
+        self._rules = RuleBook(
+            track_length=self.track.length,
+            is_loop=self.track.is_loop,
+            mode=config.mode,
+            laps=config.laps,
+            penalties=config.penalties,
+            max_resets=config.max_resets,
+            time_limit_s=config.time_limit_s,
+        )
+        self._needs_camera = any(s in ("camera", "stereo") for c in config.cars for s in c.sensors)
+        self._camera = CameraRenderer(self.track) if self._needs_camera else None
+        self._waypoints = [tuple(map(float, w)) for w in self.track.waypoints]
+        self._check_fits()
+        self._client: int | None = None
+        self._episode = -1
+        self._renderer = None
+        self.time = 0.0
+
+    # ------------------------------------------------------------------ spaces
+    def observation_space(self, agent: str) -> spaces.Dict:
+        """The agent's observation space: a Dict with one entry per sensor."""
+        return self._obs_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        """``Discrete(n)`` for a discrete action list, ``Box(-1, 1, (2,))`` for continuous."""
+        return self._act_spaces[agent]
+
+    # ------------------------------------------------------------------- setup
+    def _reward_table(
+        self, reward_functions: RewardFunction | Mapping[str, RewardFunction] | None
+    ) -> dict[str, RewardFunction]:
+        if reward_functions is None:
+            return dict.fromkeys(self.possible_agents, follow_center_line)
+        if callable(reward_functions):
+            return dict.fromkeys(self.possible_agents, reward_functions)
+        unknown = set(reward_functions) - set(self.possible_agents)
+        if unknown:
+            raise ConfigError(f"reward functions given for unknown cars {sorted(unknown)}")
+        return {a: reward_functions.get(a, follow_center_line) for a in self.possible_agents}
+
+    def _check_fits(self) -> None:
+        """Fail before anything starts when obstacles or bots cannot fit on the track."""
+        rng = np.random.default_rng(0)
+        if self.config.obstacles is not None:
+            obstacle_places(self.config.obstacles, self.track, 0.0, rng)
+        if self.config.bots is not None:
+            bot_places(self.config.bots.count, self.config.bots.min_gap_m, self.track, 0.0)
+
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Start a new race or training episode; ``seed`` defaults to the config's seed."""
+        if seed is None:
+            seed = self.config.seed if self._episode < 0 else None
+        if seed is not None:
+            self._seed_seq = np.random.SeedSequence(seed)
+            self._episode = -1
+        self._episode += 1
+        self.rng = np.random.default_rng(self._seed_seq.spawn(1)[0])
+        self._build_world()
+        self.time = 0.0
+        self.agents = list(self.possible_agents)
+        observations = self._observe()
+        infos = {a: self._info(a, self._initial_params(a)) for a in self.agents}
+        return observations, infos
+
+    def _build_world(self) -> None:
+        if self._client is not None:
+            world.close(self._client)
+        self._client = client = world.create_world(self._physics)
+        arc0 = start_arc(self.config, self.track, self._episode)
+        self._obstacles = []
+        if self.config.obstacles is not None:
+            size = self.config.obstacles.size
+            for place, lane in obstacle_places(self.config.obstacles, self.track, arc0, self.rng):
+                body = world.add_box(client, place.x, place.y, place.yaw, size=size)
+                self._obstacles.append(_Obstacle(body, place, lane, size))
+        self._bots = []
+        if self.config.bots is not None:
+            bots = self.config.bots
+            for place, lane in bot_places(bots.count, bots.min_gap_m, self.track, arc0):
+                car = Car(client, CarSpec(), place.x, place.y, place.yaw, color=BOT_COLOR)
+                driver = LaneFollower(self.track, bots.speed, lane=lane)
+                self._bots.append(_Bot(car, driver, self._next_lane_change()))
+        self._cars: dict[str, _Live] = {}
+        for i, (agent, place) in enumerate(
+            zip(self.possible_agents, car_grid(self.config, self.track, arc0), strict=True)
+        ):
+            car = Car(client, CarSpec(), place.x, place.y, place.yaw, color=CAR_COLORS[i])
+            point = car.model_point()
+            record = self._rules.start(self._arc_of(point), 0.0)
+            self._cars[agent] = _Live(car, record, last_point=point)
+        self._lidar = Lidar(client)
+        self._body_owner = {live.car.body_id: a for a, live in self._cars.items()}
+        self._bot_bodies = {bot.car.body_id for bot in self._bots}
+        self._obstacle_bodies = {o.body: o for o in self._obstacles}
+
+    def _next_lane_change(self) -> float:
+        bots = self.config.bots
+        assert bots is not None
+        return self.time + float(self.rng.uniform(bots.lane_change_min_s, bots.lane_change_max_s))
+
+    # -------------------------------------------------------------------- step
+    def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        """Advance every live car by one control period (1/15 s by default)."""
+        if self._client is None:
+            raise RuntimeError("call reset() before step()")
+        for agent in self.agents:
+            live = self._cars[agent]
+            if agent not in actions:
+                raise ValueError(f"no action given for car {agent!r}")
+            steer, speed = self._car_configs[agent].action_space.to_command(actions[agent])
+            live.command = (steer, speed)
+            if live.hold is None:
+                live.car.apply_command(steer, speed)
+        self._drive_bots()
+        world.step(self._client, self._physics)
+        self.time += self.config.control_dt
+        for agent in self.agents:
+            hold = self._cars[agent].hold
+            if hold is not None:
+                self._cars[agent].car.teleport(hold.x, hold.y, hold.yaw)
+
+        judged = self._judge()
+        observations = self._observe()
+        rewards, terminations, truncations, infos = {}, {}, {}, {}
+        for agent in self.agents:
+            live = self._cars[agent]
+            params = judged[agent]
+            fn = self._rewards[agent]
+            rewards[agent] = check_reward(fn(params), agent, live.record.steps, params)
+            terminations[agent] = live.record.done and not live.record.truncated
+            truncations[agent] = live.record.truncated
+            infos[agent] = self._info(agent, params)
+        for agent in list(self.agents):
+            if self._cars[agent].record.done:
+                self._park(agent)
+        self.agents = [a for a in self.agents if not self._cars[a].record.done]
+        return observations, rewards, terminations, truncations, infos
+
+    def _drive_bots(self) -> None:
+        for bot in self._bots:
+            if self.time >= bot.next_change:
+                bot.driver.lane = "outer" if bot.driver.lane == "inner" else "inner"
+                bot.next_change = self._next_lane_change()
+            state = bot.car.state()
+            bot.car.apply_command(*bot.driver.command(state.x, state.y, state.yaw))
+
+    def _judge(self) -> dict[str, dict[str, Any]]:
+        """Measure every live car, apply the rules, respawn or hold penalised cars."""
+        agents = self.agents
+        states = {a: self._cars[a].car.state() for a in agents}
+        points = np.array([self._cars[a].car.model_point() for a in agents])
+        wheels = np.vstack([self._cars[a].car.wheel_points() for a in agents])
+        on_road = self.track.contains(wheels).reshape(len(agents), 4)
+        projection = self.track.project(points)
+        crash_with = self._at_fault_crashes(agents, projection.arc_length)
+        params = {}
+        for i, agent in enumerate(agents):
+            live = self._cars[agent]
+            rec = live.record
+            was_frozen = rec.frozen
+            moved = float(np.linalg.norm(points[i] - live.last_point))
+            live.last_point = points[i]
+            status = self._rules.update(
+                rec,
+                Measurement(
+                    arc=float(projection.arc_length[i]),
+                    moved=moved,
+                    any_wheel_on_track=bool(on_road[i].any()),
+                    crashed=agent in crash_with,
+                ),
+                self.time,
+            )
+            if was_frozen and not rec.frozen:
+                live.hold = None
+            elif not was_frozen and rec.frozen:
+                self._respawn(live, status, float(projection.offset[i]), crash_with.get(agent))
+            params[agent] = build_params(
+                track=self.track,
+                is_reversed=self.is_reversed,
+                model_point=points[i],
+                yaw=states[agent].yaw,
+                projection=projection,
+                index=i,
+                progress=self._rules.progress(rec),
+                steps=rec.steps,
+                speed=live.command[1],
+                steering_angle=live.command[0],
+                all_wheels_on_track=bool(on_road[i].all()),
+                is_offtrack=status == "off_track",
+                is_crashed=status == "crashed",
+                objects=self._objects_view(exclude=agent),
+                waypoints=self._waypoints,
+            )
+        return params
+
+    def _at_fault_crashes(self, agents: list[str], arcs: np.ndarray) -> dict[str, int | None]:
+        """Cars at fault for a contact this step, with the obstacle body they hit (if any).
+
+        A car touching an obstacle is at fault; of two cars (or a car and a bot) touching,
+        the one behind along the track is.
+        """
+        racing = [live.car.body_id for live in self._cars.values() if not live.parked]
+        bodies = racing + [b.car.body_id for b in self._bots] + list(self._obstacle_bodies)
+        arc_of = {self._cars[a].car.body_id: float(arcs[i]) for i, a in enumerate(agents)}
+        if self._bots:
+            bot_arcs = self.track.project(
+                np.array([b.car.model_point() for b in self._bots])
+            ).arc_length
+            arc_of.update(
+                {b.car.body_id: float(s) for b, s in zip(self._bots, bot_arcs, strict=True)}
+            )
+        at_fault: dict[str, int | None] = {}
+        for a, b in world.contact_pairs(self._client, bodies):
+            for car, other in ((a, b), (b, a)):
+                agent = self._body_owner.get(car)
+                if agent is None or agent not in agents:
+                    continue
+                if other in self._obstacle_bodies:
+                    at_fault[agent] = other
+                elif other in arc_of and self._is_behind(arc_of[car], arc_of[other]):
+                    at_fault.setdefault(agent, None)
+        return at_fault
+
+    def _is_behind(self, arc: float, other_arc: float) -> bool:
+        gap = other_arc - arc
+        if self.track.is_loop:
+            half = 0.5 * self.track.length
+            gap = (gap + half) % self.track.length - half
+        return gap > 0
+
+    def _respawn(
+        self, live: _Live, status: EpisodeStatus, offset: float, obstacle: int | None
+    ) -> None:
+        rec = live.record
+        hit = None
+        if status == "crashed" and obstacle is not None:
+            o = self._obstacle_bodies[obstacle]
+            hit = (o.place.arc, o.lane)
+        place = respawn_place(self.track, rec.last_arc, offset, hit)
+        live.hold = place
+        live.car.teleport(place.x, place.y, place.yaw)
+        live.last_point = live.car.model_point()
+        self._rules.respawned(rec, self._arc_of(live.last_point))
+
+    def _arc_of(self, point: np.ndarray) -> float:
+        return float(self.track.project(point[None, :]).arc_length[0])
+
+    def _park(self, agent: str) -> None:
+        live = self._cars[agent]
+        if not live.parked:
+            index = self.possible_agents.index(agent)
+            live.car.teleport(PARK_DISTANCE + 10.0 * index, PARK_DISTANCE, 0.0)
+            live.parked = True
+
+    # ------------------------------------------------------------ observations
+    def _objects_view(self, exclude: str) -> ObjectsView:
+        """Obstacles, bots and the other cars still racing, as DeepRacer's object keys see them."""
+        locations, headings, speeds = [], [], []
+        for o in self._obstacles:
+            locations.append((o.place.x, o.place.y))
+            headings.append(math.degrees(o.place.yaw))
+            speeds.append(0.0)
+        movers = [b.car for b in self._bots] + [
+            self._cars[a].car
+            for a in self.possible_agents
+            if a != exclude and not self._cars[a].parked
+        ]
+        for car in movers:
+            s = car.state()
+            locations.append(tuple(car.model_point()))
+            headings.append(math.degrees(s.yaw))
+            speeds.append(abs(s.speed))
+        if not locations:
+            return ObjectsView.empty(self.track)
+        loc = np.array(locations, dtype=float)
+        heading = (np.array(headings) + 180.0) % 360.0 - 180.0
+        return ObjectsView(loc, heading, np.array(speeds), self.track.project(loc))
+
+    def _boxes(self, exclude: str) -> list[Box3D]:
+        boxes = [
+            Box3D(o.place.x, o.place.y, o.place.yaw, o.size[0], o.size[1], o.size[2], BOX_GRAY)
+            for o in self._obstacles
+        ]
+        spec = CarSpec()
+        cars = [(b.car, BOT_GRAY) for b in self._bots] + [
+            (self._cars[a].car, CAR_GRAY)
+            for a in self.possible_agents
+            if a != exclude and not self._cars[a].parked
+        ]
+        for car, gray in cars:
+            cx, cy = car.footprint().mean(axis=0)
+            boxes.append(Box3D(cx, cy, car.state().yaw, spec.length, spec.width, spec.height, gray))
+        return boxes
+
+    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
+        observations = {}
+        for agent in self.agents:
+            car = self._cars[agent].car
+            state = car.state()
+            sensors = self._car_configs[agent].sensors
+            lidar_cfg = self._car_configs[agent].lidar_config
+            obs: dict[str, np.ndarray] = {}
+            if any("lidar" in s for s in sensors):
+                ranges = self._lidar.scan(
+                    state.x, state.y, state.yaw, exclude=(car.body_id,), rng=self.rng
+                )
+                angles = self._lidar.beam_angles
+                if "lidar" in sensors:
+                    obs["lidar"] = clip_lidar(ranges)
+                if "sector_lidar" in sensors:
+                    obs["sector_lidar"] = sector_lidar(
+                        ranges, angles, num_sectors=lidar_cfg.num_sectors
+                    )
+                if "discretized_sector_lidar" in sensors:
+                    obs["discretized_sector_lidar"] = discretized_sector_lidar(
+                        ranges,
+                        angles,
+                        num_sectors=lidar_cfg.num_sectors,
+                        num_values=lidar_cfg.num_values_per_sector,
+                        clip=lidar_cfg.clipping_dist,
+                    )
+            if self._camera is not None and ("camera" in sensors or "stereo" in sensors):
+                boxes = self._boxes(exclude=agent)
+                if "camera" in sensors:
+                    obs["camera"] = self._camera.render(state.x, state.y, state.yaw, boxes)[
+                        ..., None
+                    ]
+                else:
+                    obs["stereo"] = self._camera.render_stereo(state.x, state.y, state.yaw, boxes)
+            observations[agent] = {name: obs[name] for name in self._obs_spaces[agent].spaces}
+        return observations
+
+    def _initial_params(self, agent: str) -> dict[str, Any]:
+        live = self._cars[agent]
+        point = live.car.model_point()
+        projection = self.track.project(point[None, :])
+        wheels_on = self.track.contains(live.car.wheel_points())
+        return build_params(
+            track=self.track,
+            is_reversed=self.is_reversed,
+            model_point=point,
+            yaw=live.car.state().yaw,
+            projection=projection,
+            index=0,
+            progress=0.0,
+            steps=0,
+            speed=0.0,
+            steering_angle=0.0,
+            all_wheels_on_track=bool(wheels_on.all()),
+            is_offtrack=False,
+            is_crashed=False,
+            objects=self._objects_view(exclude=agent),
+            waypoints=self._waypoints,
+        )
+
+    def _info(self, agent: str, params: dict[str, Any]) -> dict[str, Any]:
+        rec = self._cars[agent].record
+        return {
+            "params": params,
+            "episode_status": rec.status,
+            "laps": rec.laps,
+            "lap_times": list(rec.lap_times),
+            "off_track_count": rec.off_track_count,
+            "crash_count": rec.crash_count,
+            "reset_count": rec.reset_count,
+            "penalty_seconds": rec.penalty_seconds,
+            "progress": self._rules.progress(rec),
+            "time": self.time,
+        }
+
+    # ----------------------------------------------------------- rendering etc
+    def record(self, agent: str) -> CarRecord:
+        """A car's racing record: laps, lap times, incidents, penalties."""
+        return self._cars[agent].record
+
+    def car_poses(self) -> dict[str, tuple[float, float, float, float]]:
+        """``(x, y, yaw, speed)`` of every controlled car (parked ones included)."""
+        out = {}
+        for agent, live in self._cars.items():
+            s = live.car.state()
+            out[agent] = (s.x, s.y, s.yaw, s.speed)
+        return out
+
+    def bot_poses(self) -> list[tuple[float, float, float]]:
+        """``(x, y, yaw)`` of every bot car."""
+        return [(s.x, s.y, s.yaw) for s in (b.car.state() for b in self._bots)]
+
+    def obstacle_poses(self) -> list[tuple[float, float, float, float, float]]:
+        """``(x, y, yaw, length, width)`` of every obstacle box."""
+        return [(o.place.x, o.place.y, o.place.yaw, o.size[0], o.size[1]) for o in self._obstacles]
+
+    def render(self) -> np.ndarray | None:
+        """A top-down RGB picture of the race (``render_mode="rgb_array"``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        from arena.render import TopDownRenderer
+
+        if self._renderer is None:
+            self._renderer = TopDownRenderer(self.track)
+        return self._renderer.frame(
+            cars=[
+                (pose, CAR_COLORS[i])
+                for i, pose in enumerate(self.car_poses().values())
+                if not self._cars[self.possible_agents[i]].parked
+            ],
+            bots=self.bot_poses(),
+            obstacles=self.obstacle_poses(),
+        )
+
+    def close(self) -> None:
+        """Disconnect the physics client."""
+        if self._client is not None:
+            world.close(self._client)
+            self._client = None

@@ -1,0 +1,252 @@
+"""``run_race``: drive policies through a race and collect a ``RaceResult``.
+
+One runner serves the CLI, training evaluations and the league: anything with
+``reset()`` and ``act(observation)`` (the :class:`arena.policy.Policy` protocol) can
+drive. A policy with ``needs_params = True`` also receives the DeepRacer params
+(built-in drivers use them; submitted models never do).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from arena.config import RaceConfig
+from arena.env import RacingEnv, RewardFunction
+from arena.policy import Policy
+
+TRACE_COLUMNS = (
+    "t",
+    "x",
+    "y",
+    "yaw",
+    "speed",
+    "steer",
+    "throttle",
+    "action",
+    "reward",
+    "progress",
+    "status",
+    "all_wheels_on_track",
+    "closest_waypoint",
+)
+
+
+@dataclass(frozen=True)
+class CarResult:
+    """One car's race: laps and times (simulated seconds, penalties included) and incidents."""
+
+    name: str
+    status: str
+    laps: int
+    lap_times: list[float]
+    best_lap: float | None
+    average_lap: float | None
+    total_time: float | None
+    off_track_count: int
+    crash_count: int
+    reset_count: int
+    penalty_seconds: float
+    distance: float
+    finish_position: int
+
+
+@dataclass(frozen=True)
+class RaceResult:
+    """A finished race: the config it ran under, per-car results and a compact trace.
+
+    ``trace`` maps car name to columns (:data:`TRACE_COLUMNS`), one value per control step
+    the car was racing; ``bots`` holds the bot cars' ``[x, y, yaw]`` per step and
+    ``obstacles`` the boxes as ``[x, y, yaw, length, width]``.
+    """
+
+    config: RaceConfig
+    cars: list[CarResult]
+    finish_order: list[str]
+    duration: float
+    steps: int
+    trace: dict[str, dict[str, list]] = field(repr=False)
+    bots: list[list[list[float]]] = field(default_factory=list, repr=False)
+    obstacles: list[list[float]] = field(default_factory=list, repr=False)
+
+    def car(self, name: str) -> CarResult:
+        """The result of the car called ``name``."""
+        for result in self.cars:
+            if result.name == name:
+                return result
+        raise KeyError(name)
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready dict (floats at full precision)."""
+        return {
+            "config": json.loads(self.config.to_json()),
+            "ruleset_hash": self.config.ruleset_hash(),
+            "cars": [asdict(c) for c in self.cars],
+            "finish_order": self.finish_order,
+            "duration": self.duration,
+            "steps": self.steps,
+            "trace": self.trace,
+            "bots": self.bots,
+            "obstacles": self.obstacles,
+        }
+
+    def to_json(self) -> str:
+        """Canonical JSON of :meth:`to_dict`; equal results give equal text."""
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RaceResult:
+        """Rebuild a result stored with :meth:`to_dict`."""
+        return cls(
+            config=RaceConfig.model_validate(data["config"]),
+            cars=[CarResult(**c) for c in data["cars"]],
+            finish_order=list(data["finish_order"]),
+            duration=data["duration"],
+            steps=data["steps"],
+            trace=data["trace"],
+            bots=data.get("bots", []),
+            obstacles=data.get("obstacles", []),
+        )
+
+
+def _action_value(action: Any) -> Any:
+    arr = np.asarray(action)
+    if arr.ndim == 0:
+        return int(arr)
+    return [float(v) for v in arr.reshape(-1)]
+
+
+def _act(policy: Policy, observation: dict[str, Any], info: dict[str, Any]) -> Any:
+    if getattr(policy, "needs_params", False):
+        return policy.act(observation, params=info["params"])
+    return policy.act(observation)
+
+
+def run_race(
+    config: RaceConfig,
+    policies: Mapping[str, Policy],
+    *,
+    reward_functions: RewardFunction | Mapping[str, RewardFunction] | None = None,
+    on_step: Callable[[RacingEnv], None] | None = None,
+    record_trace: bool = True,
+) -> RaceResult:
+    """Race ``policies`` (one per car name in ``config.cars``) until every car is done.
+
+    ``on_step(env)`` is called after each control step (progress bars, video frames).
+    The same config, seed and policies give an identical result.
+    """
+    names = [c.name for c in config.cars]
+    missing = [n for n in names if n not in policies]
+    if missing:
+        raise ValueError(f"no policy for car(s) {missing}")
+    env = RacingEnv(config, reward_functions=reward_functions)
+    try:
+        observations, infos = env.reset(seed=config.seed)
+        for name in names:
+            policies[name].reset()
+        trace: dict[str, dict[str, list]] = {n: {c: [] for c in TRACE_COLUMNS} for n in names}
+        bots: list[list[list[float]]] = []
+        obstacles = [list(o) for o in env.obstacle_poses()]
+        last_info = dict(infos)
+        steps = 0
+        while env.agents:
+            actions = {a: _act(policies[a], observations[a], last_info[a]) for a in env.agents}
+            observations, rewards, _, _, infos = env.step(actions)
+            steps += 1
+            last_info.update(infos)
+            if record_trace:
+                _record(env, trace, actions, rewards, infos)
+                if env.bot_poses():
+                    bots.append([list(b) for b in env.bot_poses()])
+            if on_step is not None:
+                on_step(env)
+        return _result(config, env, last_info, steps, trace, bots, obstacles)
+    finally:
+        env.close()
+
+
+def _record(
+    env: RacingEnv,
+    trace: dict[str, dict[str, list]],
+    actions: Mapping[str, Any],
+    rewards: Mapping[str, float],
+    infos: Mapping[str, dict[str, Any]],
+) -> None:
+    poses = env.car_poses()
+    for agent, info in infos.items():
+        params = info["params"]
+        x, y, yaw, speed = poses[agent]
+        columns = trace[agent]
+        columns["t"].append(info["time"])
+        columns["x"].append(x)
+        columns["y"].append(y)
+        columns["yaw"].append(yaw)
+        columns["speed"].append(speed)
+        columns["steer"].append(params["steering_angle"])
+        columns["throttle"].append(params["speed"])
+        columns["action"].append(_action_value(actions[agent]))
+        columns["reward"].append(rewards[agent])
+        columns["progress"].append(info["progress"])
+        columns["status"].append(info["episode_status"])
+        columns["all_wheels_on_track"].append(params["all_wheels_on_track"])
+        columns["closest_waypoint"].append(params["closest_waypoints"][1])
+
+
+def _result(
+    config: RaceConfig,
+    env: RacingEnv,
+    infos: Mapping[str, dict[str, Any]],
+    steps: int,
+    trace: dict[str, dict[str, list]],
+    bots: list[list[list[float]]],
+    obstacles: list[list[float]],
+) -> RaceResult:
+    rows = []
+    for car in config.cars:
+        rec = env.record(car.name)
+        laps = list(rec.lap_times)
+        finished = rec.finished
+        status = "finished" if finished else ("time_up" if rec.truncated else "dnf")
+        rows.append(
+            {
+                "name": car.name,
+                "status": status,
+                "laps": len(laps),
+                "lap_times": laps,
+                "best_lap": min(laps) if laps else None,
+                "average_lap": sum(laps) / len(laps) if laps else None,
+                "total_time": sum(laps) if finished else None,
+                "off_track_count": rec.off_track_count,
+                "crash_count": rec.crash_count,
+                "reset_count": rec.reset_count,
+                "penalty_seconds": rec.penalty_seconds,
+                "distance": rec.distance,
+            }
+        )
+    order = sorted(
+        rows,
+        key=lambda r: (
+            r["status"] != "finished",
+            r["total_time"] if r["total_time"] is not None else math.inf,
+            -r["laps"],
+            -r["distance"],
+            r["name"],
+        ),
+    )
+    position = {r["name"]: i + 1 for i, r in enumerate(order)}
+    cars = [CarResult(**r, finish_position=position[r["name"]]) for r in rows]
+    return RaceResult(
+        config=config,
+        cars=cars,
+        finish_order=[r["name"] for r in order],
+        duration=env.time,
+        steps=steps,
+        trace=trace,
+        bots=bots,
+        obstacles=obstacles,
+    )

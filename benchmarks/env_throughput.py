@@ -1,0 +1,108 @@
+"""Env throughput: agent-steps per second per core, step latency and memory per env.
+
+Run: ``.venv/bin/python benchmarks/env_throughput.py [--steps N]``. Single process, so
+the figures are per core. The "physics floor" row is the raw PyBullet cost of the same
+substeps with the same cars (no sensors, rules or params); each config's ratio to it
+shows what the rest of the step costs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+import tracemalloc
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+import arena
+from arena import world
+
+CONFIGS = [
+    ("1 car, lidar", 1, ("lidar",)),
+    ("4 cars, lidar", 4, ("lidar",)),
+    ("4 cars, camera+lidar", 4, ("camera", "lidar")),
+    ("4 cars, stereo+lidar", 4, ("stereo", "lidar")),
+]
+
+
+def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str, float]:
+    """Step a race with fixed mid-speed straight actions; reset whenever it ends."""
+    race_type = "head_to_model" if num_cars > 1 else "time_trial"
+    tracemalloc.start()
+    env = arena.parallel_env(
+        race_type=race_type, num_cars=num_cars, sensors=sensors, time_limit_s=1e6, laps=100
+    )
+    env.reset(seed=0)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    rng = np.random.default_rng(0)
+    latencies = []
+    agent_steps = 0
+    for _ in range(steps):
+        actions = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+        start = time.perf_counter()
+        env.step(actions)
+        latencies.append(time.perf_counter() - start)
+        agent_steps += len(actions)
+        if not env.agents:
+            env.reset()
+    env.close()
+    total = sum(latencies)
+    return {
+        "agent_steps_per_s": agent_steps / total,
+        "p50_ms": 1e3 * float(np.median(latencies)),
+        "p99_ms": 1e3 * float(np.percentile(latencies, 99)),
+        "step_ms": 1e3 * total / steps,
+        "mem_mb": peak / 2**20,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=600, help="control steps per config")
+    args = parser.parse_args()
+    settings = world.PhysicsSettings()
+    table = Table(title=f"RacingEnv throughput ({args.steps} steps per config, one process)")
+    for col in (
+        "config",
+        "agent-steps/s/core",
+        "step ms (mean)",
+        "p50 ms",
+        "p99 ms",
+        "x physics floor",
+        "env alloc MB",
+    ):
+        table.add_column(col, justify="left" if col == "config" else "right")
+    floors = {}
+    for cars in (1, 4):
+        floors[cars] = world.physics_cost(cars, settings, steps=args.steps)
+        table.add_row(
+            f"physics floor, {cars} car(s)",
+            f"{cars / floors[cars]:.0f}",
+            f"{1e3 * floors[cars]:.2f}",
+            "",
+            "",
+            "1.0",
+            "",
+        )
+    for name, cars, sensors in CONFIGS:
+        m = measure_env(cars, sensors, args.steps)
+        table.add_row(
+            name,
+            f"{m['agent_steps_per_s']:.0f}",
+            f"{m['step_ms']:.2f}",
+            f"{m['p50_ms']:.2f}",
+            f"{m['p99_ms']:.2f}",
+            f"{m['step_ms'] / (1e3 * floors[cars]):.1f}",
+            f"{m['mem_mb']:.1f}",
+        )
+    Console().print(table)
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    Console().print(f"process peak RSS {rss:.0f} MB; settings: {settings}")
+
+
+if __name__ == "__main__":
+    main()

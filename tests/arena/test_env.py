@@ -1,0 +1,235 @@
+"""RacingEnv against PettingZoo's API tests and DeepRacer's rules, with real PyBullet."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+import arena
+from arena.drivers import LaneFollowerPolicy
+from arena.env import RacingEnv, resolve_track
+from arena.race import run_race
+
+PARAM_KEYS = {
+    "all_wheels_on_track",
+    "x",
+    "y",
+    "heading",
+    "speed",
+    "steering_angle",
+    "progress",
+    "steps",
+    "distance_from_center",
+    "track_width",
+    "track_length",
+    "waypoints",
+    "closest_waypoints",
+    "is_left_of_center",
+    "is_reversed",
+    "is_offtrack",
+    "is_crashed",
+    "projection_distance",
+}
+OBJECT_KEYS = {
+    "closest_objects",
+    "objects_location",
+    "objects_left_of_center",
+    "objects_distance",
+    "objects_distance_from_center",
+    "objects_heading",
+    "objects_speed",
+    "object_in_camera",
+}
+SENSOR_SETS = [
+    (1, ("camera", "lidar")),
+    (1, ("stereo", "discretized_sector_lidar")),
+    (4, ("camera", "sector_lidar")),
+    (4, ("stereo", "lidar")),
+]
+
+
+def _env(num_cars: int, sensors: tuple[str, ...], **kwargs) -> RacingEnv:
+    race_type = "head_to_model" if num_cars > 1 else "time_trial"
+    return arena.parallel_env(race_type=race_type, num_cars=num_cars, sensors=sensors, **kwargs)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("num_cars", "sensors"), SENSOR_SETS)
+def test_pettingzoo_parallel_api(num_cars: int, sensors: tuple[str, ...]) -> None:
+    parallel_api_test(_env(num_cars, sensors), num_cycles=300)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("num_cars", "sensors"), [SENSOR_SETS[0], SENSOR_SETS[3]])
+def test_pettingzoo_seed_test(num_cars: int, sensors: tuple[str, ...]) -> None:
+    parallel_seed_test(lambda: _env(num_cars, sensors), num_cycles=50)
+
+
+def test_observations_match_the_declared_spaces() -> None:
+    env = _env(2, ("stereo", "lidar"))
+    obs, _ = env.reset(seed=3)
+    for agent in env.agents:
+        space = env.observation_space(agent)
+        assert space.contains(obs[agent])
+        assert obs[agent]["stereo"].shape == (120, 160, 2)
+        assert obs[agent]["lidar"].dtype == np.float32
+        assert obs[agent]["lidar"].min() >= 0.15 and obs[agent]["lidar"].max() <= 1.0
+    env.close()
+
+
+def test_params_carry_every_deepracer_key() -> None:
+    env = arena.parallel_env(race_type="time_trial")
+    env.reset(seed=0)
+    _, _, _, _, infos = env.step({"car0": 4})
+    params = infos["car0"]["params"]
+    assert set(params) >= PARAM_KEYS
+    assert not OBJECT_KEYS & set(params)
+    assert params["steps"] == 1
+    assert params["track_length"] == pytest.approx(env.track.length)
+    assert params["closest_waypoints"][1] == params["closest_waypoints"][0] + 1
+    assert -180 < params["heading"] <= 180
+    assert params["all_wheels_on_track"] and not params["is_offtrack"]
+    assert params["speed"] == 0.4 and params["steering_angle"] == 0.0  # commanded action 4
+    assert set(infos["car0"]) >= {"episode_status", "laps", "lap_times", "penalty_seconds"}
+    env.close()
+
+
+def test_object_keys_appear_with_obstacles() -> None:
+    env = arena.parallel_env(race_type="object_avoidance", seed=5)
+    _, infos = env.reset()
+    params = infos["car0"]["params"]
+    assert set(params) >= OBJECT_KEYS
+    assert len(params["objects_location"]) == 6
+    _, ahead = params["closest_objects"]
+    distances = params["objects_distance"]
+    mine = params["projection_distance"]
+    gaps = [(d - mine) % env.track.length for d in distances]
+    assert ahead == int(np.argmin(gaps))
+    lanes = params["objects_left_of_center"]
+    order = np.argsort(distances)
+    assert all(lanes[order[i]] != lanes[order[i + 1]] for i in range(5))  # alternating
+    env.close()
+
+
+def test_reversed_direction_flags_params() -> None:
+    env = arena.parallel_env(direction="cw")
+    _, infos = env.reset()
+    assert infos["car0"]["params"]["is_reversed"]
+    assert env.track.direction == "cw"
+    env.close()
+
+
+def test_bad_reward_is_refused_naming_car_and_step() -> None:
+    env = arena.parallel_env(reward_function=lambda params: math.nan)
+    env.reset()
+    with pytest.raises(ValueError, match=r"car 'car0'.*step 1"):
+        env.step({"car0": 4})
+    env.close()
+
+
+def test_bot_driver_completes_laps_with_plausible_times() -> None:
+    config = arena.make_config(laps=2, time_limit_s=120.0)
+    track, _ = resolve_track(config)
+    policy = LaneFollowerPolicy(track, config.cars[0].action_space, speed=0.8)
+    result = run_race(config, {"car0": policy})
+    car = result.car("car0")
+    assert car.status == "finished" and car.laps == 2
+    assert car.off_track_count == 0 and car.reset_count == 0
+    ideal = track.length / 0.8
+    assert ideal * 0.95 < car.lap_times[1] < ideal * 1.25
+    assert car.total_time == pytest.approx(sum(car.lap_times))
+
+
+def test_off_track_in_race_mode_costs_the_penalty_and_respawns() -> None:
+    class FullLock:
+        def reset(self) -> None: ...
+
+        def act(self, observation):
+            return 1  # -30 deg at 0.8 m/s: drives off the track to the right
+
+    config = arena.make_config(laps=1, time_limit_s=12.0)
+    result = run_race(config, {"car0": FullLock()})
+    car = result.car("car0")
+    statuses = result.trace["car0"]["status"]
+    assert car.off_track_count >= 1
+    assert "pause" in statuses
+    first = statuses.index("off_track")
+    pause_steps = round(config.penalties.off_track_s * config.physics.control_hz)
+    assert statuses[first + 1 : first + pause_steps] == ["pause"] * (pause_steps - 1)
+    assert car.penalty_seconds >= config.penalties.off_track_s
+    assert car.status == "time_up"
+
+
+def test_object_avoidance_crash_respawns_behind_the_box_in_the_other_lane() -> None:
+    config = arena.make_config(
+        race_type="object_avoidance",
+        obstacles={"count": 1, "positions": [[15.0, "inner"]]},
+        laps=1,
+        time_limit_s=25.0,
+    )
+    track, _ = resolve_track(config)
+    inner = LaneFollowerPolicy(track, config.cars[0].action_space, speed=0.8)
+    inner.follower.lane = "inner"
+    result = run_race(config, {"car0": inner})
+    car = result.car("car0")
+    assert car.crash_count >= 1
+    statuses = result.trace["car0"]["status"]
+    i = statuses.index("crashed")
+    x, y = result.trace["car0"]["x"][i + 1], result.trace["car0"]["y"][i + 1]
+    box_arc = 0.15 * track.length
+    proj = track.project(np.array([[x, y]]))
+    assert proj.arc_length[0] == pytest.approx(box_arc - 1.0 - 0.0, abs=0.35)
+    assert not proj.is_left_of_center[0]  # inner = left on a ccw loop; respawned outer
+
+
+def test_head_to_model_rear_car_is_at_fault() -> None:
+    config = arena.make_config(race_type="head_to_model", num_cars=2, laps=1, time_limit_s=15.0)
+    track, _ = resolve_track(config)
+    space = config.cars[0].action_space
+    slow = LaneFollowerPolicy(track, space, speed=0.4)
+    fast = LaneFollowerPolicy(track, space, speed=0.8)
+    result = run_race(config, {"car0": slow, "car1": fast})  # car1 starts behind
+    assert result.car("car1").crash_count >= 1
+    assert result.car("car0").crash_count == 0
+
+
+def test_top_down_render_shows_the_cars() -> None:
+    env = arena.parallel_env(race_type="head_to_bot", render_mode="rgb_array")
+    env.reset()
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.dtype == np.uint8
+    red = (frame[..., 0] > 180) & (frame[..., 1] < 60) & (frame[..., 2] < 60)
+    assert red.sum() > 10  # car0 is red
+    env.close()
+
+
+def bot_race_hash() -> str:
+    """sha256 of a head-to-bot race's canonical JSON (camera and lidar on)."""
+    import hashlib
+
+    config = arena.make_config(
+        race_type="head_to_bot", laps=1, time_limit_s=10.0, seed=11, sensors=("camera", "lidar")
+    )
+    track, _ = resolve_track(config)
+    policy = LaneFollowerPolicy(track, config.cars[0].action_space, speed=1.0)
+    return hashlib.sha256(run_race(config, {"car0": policy}).to_json().encode()).hexdigest()
+
+
+@pytest.mark.slow
+def test_race_is_bit_identical_in_a_fresh_process() -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = "from tests.arena.test_env import bot_race_hash; print(bot_race_hash())"
+    root = Path(__file__).resolve().parents[2]
+    fresh = [
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root
+        ).stdout.split()[-1]
+        for _ in range(2)
+    ]
+    assert fresh[0] == fresh[1] == bot_race_hash()
