@@ -214,6 +214,7 @@ class RacingEnv(ParallelEnv):
             record = self._rules.start(self._arc_of(point), 0.0)
             self._cars[agent] = _Live(car, record, last_point=point)
         self._lidar = Lidar(client)
+        self._car_episodes = dict.fromkeys(self.possible_agents, 0)
         self._body_owner = {live.car.body_id: a for a, live in self._cars.items()}
         self._bot_bodies = {bot.car.body_id for bot in self._bots}
         self._obstacle_bodies = {o.body: o for o in self._obstacles}
@@ -377,6 +378,29 @@ class RacingEnv(ParallelEnv):
             live.car.teleport(PARK_DISTANCE + 10.0 * index, PARK_DISTANCE, 0.0)
             live.parked = True
 
+    def restart_car(self, agent: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Start a new training episode for one car whose episode ended, others racing on.
+
+        The car comes back on the centre line at the next training start point (5% further
+        along each time) and rejoins ``agents``. Training only: races are never restarted.
+        Returns the car's first observation and info.
+        """
+        if self.config.mode != "training":
+            raise RuntimeError("restart_car is for training mode; races run to the end")
+        live = self._cars[agent]
+        if agent in self.agents:
+            raise RuntimeError(f"car {agent!r} is still racing")
+        self._car_episodes[agent] += 1
+        arc = start_arc(self.config, self.track, self._episode + self._car_episodes[agent])
+        place = car_grid(self.config, self.track, arc)[0]
+        live.car.teleport(place.x, place.y, place.yaw)
+        live.last_point = live.car.model_point()
+        live.record = self._rules.start(self._arc_of(live.last_point), self.time)
+        live.hold, live.parked, live.command = None, False, (0.0, 0.0)
+        self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
+        observation = self._observe_one(agent)
+        return observation, self._info(agent, self._initial_params(agent))
+
     # ------------------------------------------------------------ observations
     def _objects_view(self, exclude: str) -> ObjectsView:
         """Obstacles, bots and the other cars still racing, as DeepRacer's object keys see them."""
@@ -418,42 +442,40 @@ class RacingEnv(ParallelEnv):
         return boxes
 
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
-        observations = {}
-        for agent in self.agents:
-            car = self._cars[agent].car
-            state = car.state()
-            sensors = self._car_configs[agent].sensors
-            lidar_cfg = self._car_configs[agent].lidar_config
-            obs: dict[str, np.ndarray] = {}
-            if any("lidar" in s for s in sensors):
-                ranges = self._lidar.scan(
-                    state.x, state.y, state.yaw, exclude=(car.body_id,), rng=self.rng
+        return {agent: self._observe_one(agent) for agent in self.agents}
+
+    def _observe_one(self, agent: str) -> dict[str, np.ndarray]:
+        car = self._cars[agent].car
+        state = car.state()
+        sensors = self._car_configs[agent].sensors
+        lidar_cfg = self._car_configs[agent].lidar_config
+        obs: dict[str, np.ndarray] = {}
+        if any("lidar" in s for s in sensors):
+            ranges = self._lidar.scan(
+                state.x, state.y, state.yaw, exclude=(car.body_id,), rng=self.rng
+            )
+            angles = self._lidar.beam_angles
+            if "lidar" in sensors:
+                obs["lidar"] = clip_lidar(ranges)
+            if "sector_lidar" in sensors:
+                obs["sector_lidar"] = sector_lidar(
+                    ranges, angles, num_sectors=lidar_cfg.num_sectors
                 )
-                angles = self._lidar.beam_angles
-                if "lidar" in sensors:
-                    obs["lidar"] = clip_lidar(ranges)
-                if "sector_lidar" in sensors:
-                    obs["sector_lidar"] = sector_lidar(
-                        ranges, angles, num_sectors=lidar_cfg.num_sectors
-                    )
-                if "discretized_sector_lidar" in sensors:
-                    obs["discretized_sector_lidar"] = discretized_sector_lidar(
-                        ranges,
-                        angles,
-                        num_sectors=lidar_cfg.num_sectors,
-                        num_values=lidar_cfg.num_values_per_sector,
-                        clip=lidar_cfg.clipping_dist,
-                    )
-            if self._camera is not None and ("camera" in sensors or "stereo" in sensors):
-                boxes = self._boxes(exclude=agent)
-                if "camera" in sensors:
-                    obs["camera"] = self._camera.render(state.x, state.y, state.yaw, boxes)[
-                        ..., None
-                    ]
-                else:
-                    obs["stereo"] = self._camera.render_stereo(state.x, state.y, state.yaw, boxes)
-            observations[agent] = {name: obs[name] for name in self._obs_spaces[agent].spaces}
-        return observations
+            if "discretized_sector_lidar" in sensors:
+                obs["discretized_sector_lidar"] = discretized_sector_lidar(
+                    ranges,
+                    angles,
+                    num_sectors=lidar_cfg.num_sectors,
+                    num_values=lidar_cfg.num_values_per_sector,
+                    clip=lidar_cfg.clipping_dist,
+                )
+        if self._camera is not None and ("camera" in sensors or "stereo" in sensors):
+            boxes = self._boxes(exclude=agent)
+            if "camera" in sensors:
+                obs["camera"] = self._camera.render(state.x, state.y, state.yaw, boxes)[..., None]
+            else:
+                obs["stereo"] = self._camera.render_stereo(state.x, state.y, state.yaw, boxes)
+        return {name: obs[name] for name in self._obs_spaces[agent].spaces}
 
     def _initial_params(self, agent: str) -> dict[str, Any]:
         live = self._cars[agent]

@@ -233,3 +233,24 @@ def test_race_is_bit_identical_in_a_fresh_process() -> None:
         for _ in range(2)
     ]
     assert fresh[0] == fresh[1] == bot_race_hash()
+
+
+def test_training_restart_car_starts_a_new_episode_for_one_car() -> None:
+    env = arena.parallel_env(race_type="head_to_model", num_cars=2, mode="training")
+    _, infos = env.reset(seed=0)
+    driver = LaneFollowerPolicy(env.track, env.config.cars[1].action_space, speed=0.8)
+    for _ in range(200):
+        actions = {"car0": 1, "car1": driver.act({}, params=infos["car1"]["params"])}
+        _, _, _, _, step_infos = env.step(actions)  # car0 turns off the track at full lock
+        infos.update(step_infos)
+        if "car0" not in env.agents:
+            break
+    assert "car0" not in env.agents and "car1" in env.agents
+    assert env.record("car0").status in ("off_track", "reversed")  # a tight circle
+    obs, info = env.restart_car("car0")
+    assert env.agents == ["car0", "car1"]
+    assert env.observation_space("car0").contains(obs)
+    assert info["episode_status"] == "prepare" and info["params"]["all_wheels_on_track"]
+    _, _, terms, _, step_infos = env.step({"car0": 4, "car1": 4})
+    assert step_infos["car0"]["params"]["steps"] == 1 and not terms["car0"]
+    env.close()
