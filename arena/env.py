@@ -31,7 +31,7 @@ from arena.rules import CarRecord, EpisodeStatus, Measurement, RuleBook
 from arena.sensors_spec import observation_space
 from arena.spawn import Placement, bot_places, car_grid, obstacle_places, respawn_place, start_arc
 from tracks.catalog import get_track
-from tracks.track import Track
+from tracks.track import Track, TrackError
 
 RewardFunction = Callable[[dict[str, Any]], float]
 CAR_COLORS = [
@@ -77,8 +77,14 @@ class _Live:
 
 
 def resolve_track(config: RaceConfig) -> tuple[Track, bool]:
-    """The config's track in its race direction, and whether that reverses the file."""
-    native = get_track(config.track)
+    """The config's track in its race direction, and whether that reverses the file.
+
+    An unknown or unreadable track is a :class:`ConfigError`.
+    """
+    try:
+        native = get_track(config.track)
+    except TrackError as exc:
+        raise ConfigError(f"invalid race config: track: {exc}") from None
     return native.with_direction(config.direction), native.direction != config.direction
 
 

@@ -58,5 +58,5 @@ def test_obstacles_that_do_not_fit_are_refused_before_the_race() -> None:
 
 
 def test_unknown_track_is_refused() -> None:
-    with pytest.raises(Exception, match="no_such_track"):
+    with pytest.raises(ConfigError, match="no_such_track"):
         arena.parallel_env(track="no_such_track")
