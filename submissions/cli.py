@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
@@ -12,8 +12,10 @@ from rich.table import Table
 from rich.text import Text
 
 from arena.actions import DiscreteActionSpace
-from submissions.preflight import PreflightResult
 from submissions.validator import ModelInfo, ValidationReport, validate
+
+if TYPE_CHECKING:
+    from submissions.preflight import PreflightResult
 
 app = typer.Typer(help="Check and inspect submission files.", no_args_is_help=True)
 console = Console()

@@ -1,0 +1,100 @@
+"""``slipstream tracks`` commands, run through Typer's test runner."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tracks.catalog import builtin_names, get_track
+from tracks.cli import app
+from tracks.io import write_document
+
+DATA = Path(__file__).resolve().parents[3] / "shared" / "deepracer-data" / "tracks"
+needs_data = pytest.mark.skipif(
+    not DATA.is_dir(), reason=f"real DeepRacer tracks not found at {DATA}"
+)
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def home(tmp_path, monkeypatch):
+    monkeypatch.setenv("SLIPSTREAM_HOME", str(tmp_path / "home"))
+    return tmp_path / "home"
+
+
+def _ok(*args: str):
+    result = runner.invoke(app, list(args))
+    assert result.exit_code == 0, result.output
+    return result
+
+
+def _fails(*args: str):
+    result = runner.invoke(app, list(args))
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    assert result.stdout == ""
+    return result.stderr
+
+
+def test_list_table_and_json():
+    text = _ok("list").stdout
+    assert "beginner_loop" in text and "builtin" in text
+    rows = json.loads(_ok("list", "--json").stdout)
+    assert [r["name"] for r in rows] == builtin_names()
+    assert {"name", "display_name", "length", "width", "direction", "source"} <= set(rows[0])
+
+
+def test_show_json_in_both_directions():
+    ccw = json.loads(_ok("show", "beginner_loop", "--json").stdout)
+    cw = json.loads(_ok("show", "beginner_loop", "--direction", "cw", "--json").stdout)
+    assert (ccw["direction"], cw["direction"]) == ("ccw", "cw")
+    assert ccw["length"] == cw["length"]
+    assert ccw["source"] == "builtin"
+
+
+def test_show_writes_png_with_racing_line(tmp_path):
+    png = tmp_path / "track.png"
+    out = _ok("show", "hairpin_hollow", "--png", str(png), "--raceline").stdout
+    assert "lap time" in out
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_unknown_track_is_one_clear_error():
+    for command in ("show", "raceline"):
+        err = _fails(command, "atlantis")
+        assert "unknown track 'atlantis'" in err
+        assert "beginner_loop" in err
+
+
+def test_bad_import_leaves_nothing(tmp_path, home):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{oops")
+    assert "not valid JSON" in _fails("import", str(bad))
+    assert "no such file" in _fails("import", str(tmp_path / "missing.npy"))
+    assert not (home / "tracks").exists() or not any((home / "tracks").iterdir())
+
+
+def test_import_refuses_builtin_name(tmp_path):
+    doc = tmp_path / "copy.yaml"
+    write_document(get_track("grand_tour"), doc)
+    assert "built-in" in _fails("import", str(doc))
+    imported = json.loads(_ok("import", str(doc), "--name", "my_tour", "--json").stdout)
+    assert imported["name"] == "my_tour" and imported["source"] == "user"
+    assert "my_tour" in _ok("list").stdout
+
+
+@needs_data
+@pytest.mark.realdata
+def test_import_real_file_then_raceline(home):
+    _ok("import", str(DATA / "reinvent_base.npy"))
+    assert (home / "tracks" / "reinvent_base.json").is_file()
+    doc = json.loads(_ok("raceline", "reinvent_base", "--json").stdout)
+    assert doc["track"] == "reinvent_base"
+    assert doc["length"] == pytest.approx(17.7, abs=0.1)
+    assert doc["length"] / 4.0 < doc["lap_time"] < doc["centerline_lap_time"]
+    assert doc["limits"]["max_speed"] == 4.0
+    text = _ok("raceline", "reinvent_base", "--direction", "cw").stdout
+    assert "physical-limit lap time" in text
