@@ -254,3 +254,23 @@ def test_training_restart_car_starts_a_new_episode_for_one_car() -> None:
     _, _, terms, _, step_infos = env.step({"car0": 4, "car1": 4})
     assert step_infos["car0"]["params"]["steps"] == 1 and not terms["car0"]
     env.close()
+
+
+def test_sensors_see_the_car_ahead() -> None:
+    env = arena.parallel_env(race_type="head_to_model", num_cars=2, sensors=["camera", "lidar"])
+    obs, _ = env.reset(seed=0)
+    lidar = obs["car1"]["lidar"]  # car1 starts 0.8 m behind car0, one lane to the right
+    angles = env._lidar.beam_angles
+    left_front = (angles > 0) & (angles < 0.6)
+    assert lidar[left_front].min() < 0.95
+    assert lidar[np.abs(angles) > 1.5].min() == pytest.approx(1.0)  # nothing beside or behind
+    alone = arena.parallel_env(race_type="time_trial", sensors=["camera", "lidar"])
+    alone_obs, _ = alone.reset(seed=0)
+    assert alone_obs["car0"]["lidar"].min() == pytest.approx(1.0)
+    state = env._cars["car1"].car.state()
+    empty_road = env._camera.render(state.x, state.y, state.yaw, boxes=())
+    differs = obs["car1"]["camera"][..., 0] != empty_road
+    assert differs.sum() > 100  # car0 covers part of car1's picture
+    assert differs[:, :80].sum() > differs[:, 80:].sum()  # ... on the left
+    env.close()
+    alone.close()
