@@ -1,0 +1,193 @@
+"""Load a racer's DeepRacer reward function, smoke-test it, and find the bundled samples.
+
+A reward function is a Python file defining ``reward_function(params) -> float``, exactly
+as on DeepRacer. :func:`load_reward_function` executes that file: it is the racer's own
+code, run on the racer's own machine to train their own car. It is never used on uploaded
+files; the league only ever receives ONNX graphs and JSON (see ``submissions``).
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import numbers
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from arena.params import ObjectsView, build_params
+from tracks.catalog import get_track
+from tracks.track import Track
+
+RewardFunction = Callable[[dict[str, Any]], float]
+MAX_ABS_REWARD = 1e5
+SAMPLES_DIR = Path(__file__).parent / "reward_samples"
+RACE_TYPES = ("time_trial", "object_avoidance", "head_to_bot", "head_to_model")
+
+
+class RewardFunctionError(ValueError):
+    """A reward-function file that cannot be loaded or misbehaves on sample params."""
+
+
+def _where_in(path: Path, exc: BaseException) -> str:
+    """``line N`` of the deepest traceback frame inside the racer's file, if any."""
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == str(path)]
+    return f" at line {frames[-1].lineno}" if frames else ""
+
+
+def _execute(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise RewardFunctionError(f"reward function file {path} does not exist")
+    try:
+        source = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RewardFunctionError(f"cannot read reward function file {path}: {exc}") from None
+    try:
+        code = compile(source, str(path), "exec")
+    except SyntaxError as exc:
+        raise RewardFunctionError(
+            f"{path}: syntax error at line {exc.lineno}: {exc.msg}"
+            + (f"\n    {exc.text.rstrip()}" if exc.text else "")
+        ) from None
+    namespace: dict[str, Any] = {"__name__": f"reward_file_{path.stem}", "__file__": str(path)}
+    try:
+        exec(code, namespace)  # the racer's own file on their own machine: intended
+    except Exception as exc:
+        raise RewardFunctionError(
+            f"{path}: running the file raised {type(exc).__name__}: {exc}{_where_in(path, exc)}"
+        ) from exc
+    return namespace
+
+
+def _checked_signature(fn: Callable[..., Any], path: Path) -> None:
+    try:
+        signature = inspect.signature(fn)
+    except (TypeError, ValueError):
+        return  # builtins and C callables: the sample call below decides
+    try:
+        signature.bind({})
+    except TypeError:
+        raise RewardFunctionError(
+            f"{path}: reward_function must take exactly one argument (params), "
+            f"its signature is reward_function{signature}"
+        ) from None
+
+
+def check_reward_function(
+    fn: RewardFunction, params: dict[str, Any], source: str = "reward_function"
+) -> float:
+    """Call ``fn`` on a copy of ``params``; return its reward or raise RewardFunctionError."""
+    call_params = {k: list(v) if isinstance(v, list) else v for k, v in params.items()}
+    try:
+        value = fn(call_params)
+    except Exception as exc:
+        where = _where_in(Path(source), exc)
+        raise RewardFunctionError(
+            f"{source}: reward_function raised {type(exc).__name__}: {exc}{where} "
+            f"on sample params (steps={params.get('steps')}, progress={params.get('progress')})"
+        ) from exc
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise RewardFunctionError(
+            f"{source}: reward_function must return a number, got {type(value).__name__} "
+            f"({value!r:.60})"
+        )
+    reward = float(value)
+    if not math.isfinite(reward) or abs(reward) > MAX_ABS_REWARD:
+        raise RewardFunctionError(
+            f"{source}: reward_function returned {reward!r}; rewards must be finite and "
+            f"within +-{MAX_ABS_REWARD:g}"
+        )
+    return reward
+
+
+def load_reward_function(path: str | Path, race_type: str = "time_trial") -> RewardFunction:
+    """Load ``reward_function`` from the racer's Python file and smoke-test it.
+
+    Executes the file (intended: the racer's own code on their own machine; never used on
+    uploaded files). The function is called once on :func:`sample_params` for
+    ``race_type`` (object races include the object keys). Raises
+    :class:`RewardFunctionError` for a missing file, a syntax error (with its line), no
+    ``reward_function``, a non-callable one, a wrong signature, an exception on the sample
+    params, or a return value that is not a finite number within +-1e5.
+    """
+    path = Path(path)
+    namespace = _execute(path)
+    if "reward_function" not in namespace:
+        raise RewardFunctionError(f"{path} does not define reward_function(params)")
+    fn = namespace["reward_function"]
+    if not callable(fn):
+        raise RewardFunctionError(
+            f"{path}: reward_function must be a function, got {type(fn).__name__}"
+        )
+    _checked_signature(fn, path)
+    check_reward_function(fn, sample_params(race_type), source=str(path))
+    return fn
+
+
+def _objects(track: Track, race_type: str, car_arc: float) -> ObjectsView:
+    """Two boxes ahead in opposite lanes, or one car ahead and one behind."""
+    if race_type == "time_trial":
+        return ObjectsView.empty(track)
+    if race_type == "object_avoidance":
+        arcs, lanes, speeds = [car_arc + 1.5, car_arc + 4.0], ["inner", "outer"], [0.0, 0.0]
+    else:
+        arcs, lanes, speeds = [car_arc + 1.2, car_arc - 0.8], ["inner", "outer"], [1.0, 1.4]
+    points, yaws = [], []
+    for arc, lane in zip(arcs, lanes, strict=True):
+        point, yaw = track.pose_at(track.wrap_arc_length(arc), lane)
+        points.append(point)
+        yaws.append(math.degrees(float(yaw)))
+    location = np.array(points, dtype=float)
+    return ObjectsView(location, np.array(yaws), np.array(speeds), track.project(location))
+
+
+def sample_params(race_type: str = "time_trial", track: str | Track = "beginner_loop") -> dict:
+    """A realistic params dict, built by the arena's own builder, for smoke tests.
+
+    The car is a quarter of the way round ``track``, 0.1 m left of the centre line,
+    heading 5 degrees off the centre line at 1.5 m/s on step 38; object races add two
+    objects (boxes ahead in both lanes; for car races one car ahead and one behind).
+    """
+    if race_type not in RACE_TYPES:
+        raise ValueError(f"race_type must be one of {list(RACE_TYPES)}, got {race_type!r}")
+    track = get_track(track) if isinstance(track, str) else track
+    arc = 0.25 * track.length
+    point, yaw = track.pose_at(arc, 0.1)
+    yaw = float(yaw) + math.radians(5.0)
+    model_point = np.asarray(point, dtype=float)
+    projection = track.project(model_point[None, :])
+    return build_params(
+        track=track,
+        is_reversed=False,
+        model_point=model_point,
+        yaw=yaw,
+        projection=projection,
+        index=0,
+        progress=float(projection.progress[0]),
+        steps=38,
+        speed=1.5,
+        steering_angle=10.0,
+        all_wheels_on_track=True,
+        is_offtrack=False,
+        is_crashed=False,
+        objects=_objects(track, race_type, arc),
+        waypoints=[tuple(map(float, w)) for w in track.waypoints],
+    )
+
+
+def bundled_samples() -> dict[str, Path]:
+    """The bundled sample reward functions: name -> file."""
+    return {p.stem: p for p in sorted(SAMPLES_DIR.glob("*.py")) if not p.stem.startswith("_")}
+
+
+def load_sample(name: str, race_type: str = "time_trial") -> RewardFunction:
+    """Load a bundled sample by name (see :func:`bundled_samples`)."""
+    samples = bundled_samples()
+    if name not in samples:
+        raise RewardFunctionError(
+            f"no sample reward function {name!r}; choose from {list(samples)}"
+        )
+    return load_reward_function(samples[name], race_type)

@@ -1,0 +1,74 @@
+"""Pure pursuit on the racing line: clean, fast laps in both kinds of action space."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import arena
+from agents.action_spaces import continuous_action_space, parse_action_space_spec
+from agents.pursuit import MODEL_POINT_AHEAD, PurePursuitPolicy, racing_line_for
+from arena.race import run_race
+from tracks.catalog import get_track
+from tracks.raceline import compute_racing_line
+
+TRACK = "beginner_loop"
+
+
+def _race(spec: str):
+    track = get_track(TRACK)
+    space = parse_action_space_spec(spec)
+    config = arena.make_config(track=TRACK, action_space=space, laps=2, sensors=("sector_lidar",))
+    result = run_race(config, {"car0": PurePursuitPolicy(track, space)}, record_trace=False)
+    return result.car("car0"), compute_racing_line(track).lap_time
+
+
+def test_continuous_two_clean_laps_near_the_physical_limit() -> None:
+    car, limit = _race("continuous:-30:30:0.5:4")
+    assert car.status == "finished" and car.laps == 2
+    assert car.off_track_count == 0 and car.crash_count == 0
+    # the first lap includes the standing start; a flying lap stays within 25 % of the limit
+    assert car.lap_times[1] < 1.25 * limit
+
+
+def test_discrete_beginner_space_two_clean_laps() -> None:
+    car, _ = _race("3x3@1.0")
+    assert car.status == "finished" and car.laps == 2
+    assert car.off_track_count == 0 and car.crash_count == 0
+    length = get_track(TRACK).length
+    assert all(lap < 1.1 * length / 1.0 for lap in car.lap_times)  # ~1 m/s all the way
+
+
+def test_steers_towards_the_line_from_the_rear_axle() -> None:
+    track = get_track(TRACK)
+    policy = PurePursuitPolicy(track, continuous_action_space())
+    line = policy.line
+    rear = line.points[10]
+    tangent = line.points[11] - line.points[10]
+    heading = math.degrees(math.atan2(tangent[1], tangent[0]))
+    yaw = math.radians(heading)
+    model = rear + MODEL_POINT_AHEAD * np.array([math.cos(yaw), math.sin(yaw)])
+    steer, speed = policy.command(model[0], model[1], heading, 2.0)
+    normal = np.array([-math.sin(yaw), math.cos(yaw)])
+    left_steer, _ = policy.command(*(model - 0.2 * normal), heading, 2.0)
+    right_steer, _ = policy.command(*(model + 0.2 * normal), heading, 2.0)
+    assert abs(steer) < 10.0
+    assert left_steer > steer > right_steer  # right of the line steers left, and vice versa
+    assert 0.1 <= speed <= line.speed.max()
+
+
+def test_speed_is_capped_by_the_action_space_and_the_line_is_cached() -> None:
+    track = get_track(TRACK)
+    slow = PurePursuitPolicy(track, continuous_action_space(speed_low=0.5, speed_high=1.5))
+    _, speed = slow.command(*slow.line.points[0], 0.0, 1.0)
+    assert speed <= 1.5
+    assert racing_line_for(track) is slow.line
+
+
+def test_needs_params() -> None:
+    policy = PurePursuitPolicy(get_track(TRACK), continuous_action_space())
+    assert PurePursuitPolicy.needs_params
+    with pytest.raises(ValueError, match="params"):
+        policy.act({})

@@ -1,0 +1,215 @@
+"""Reward-function loading, its error messages, and the bundled samples on real env params."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import arena
+from agents.rewards import (
+    RewardFunctionError,
+    bundled_samples,
+    check_reward_function,
+    load_reward_function,
+    load_sample,
+    sample_params,
+)
+
+RACE_TYPES = ("time_trial", "object_avoidance", "head_to_model")
+SAMPLES = (
+    "follow_center_line",
+    "stay_inside_borders",
+    "prevent_zigzag",
+    "object_avoidance",
+    "head_to_head",
+    "pursuit",
+)
+
+
+def _env_params(race_type: str, steps: int = 6) -> list[dict]:
+    """Params of every car after each of a few random steps of a real env."""
+    env = arena.parallel_env(race_type=race_type, sensors=("sector_lidar",), seed=7)
+    try:
+        env.reset(seed=7)
+        rng = np.random.default_rng(7)
+        collected = []
+        for _ in range(steps):
+            actions = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+            _, _, _, _, infos = env.step(actions)
+            collected += [info["params"] for info in infos.values()]
+        return collected
+    finally:
+        env.close()
+
+
+@pytest.fixture(scope="module")
+def env_params() -> dict[str, list[dict]]:
+    return {race_type: _env_params(race_type) for race_type in RACE_TYPES}
+
+
+def test_every_sample_is_bundled_and_standalone() -> None:
+    samples = bundled_samples()
+    assert set(SAMPLES) <= set(samples)
+    for path in samples.values():
+        imports = [ln for ln in path.read_text().splitlines() if ln.startswith(("import", "from"))]
+        assert imports in ([], ["import math"]), f"{path.name} imports {imports}"
+
+
+@pytest.mark.parametrize("race_type", RACE_TYPES)
+@pytest.mark.parametrize("name", SAMPLES)
+def test_samples_run_on_real_env_params(env_params, name: str, race_type: str) -> None:
+    fn = load_sample(name, race_type)
+    for params in env_params[race_type]:
+        reward = fn(params)
+        assert isinstance(reward, float | int) and math.isfinite(reward)
+        assert abs(reward) <= 1e5
+
+
+def test_sample_params_have_the_env_keys(env_params) -> None:
+    for race_type in RACE_TYPES:
+        assert set(sample_params(race_type)) == set(env_params[race_type][0])
+    assert "objects_location" not in sample_params()
+
+
+def test_samples_prefer_what_they_document() -> None:
+    centre = sample_params()
+    wide = {**centre, "distance_from_center": 0.45 * centre["track_width"]}
+    follow = load_sample("follow_center_line")
+    assert follow(centre) > follow(wide)
+    zigzag = load_sample("prevent_zigzag")
+    assert zigzag(centre) > zigzag({**centre, "steering_angle": 25.0})
+    borders = load_sample("stay_inside_borders")
+    assert borders({**centre, "all_wheels_on_track": False}) < borders(centre)
+    pursuit = load_sample("pursuit")
+    assert pursuit({**centre, "speed": 3.0}) > pursuit(centre)
+
+    boxes = sample_params("object_avoidance")  # next box 1.5 m ahead in the inner lane
+    avoid = load_sample("object_avoidance", "object_avoidance")
+    ahead = boxes["closest_objects"][1]
+    box_lane = boxes["objects_left_of_center"][ahead]
+    boxes["objects_distance"][ahead] = boxes["projection_distance"] + 0.5
+    assert avoid({**boxes, "is_left_of_center": not box_lane}) > avoid(
+        {**boxes, "is_left_of_center": box_lane}
+    )
+    cars = sample_params("head_to_model")
+    h2h = load_sample("head_to_head", "head_to_model")
+    assert h2h({**cars, "is_crashed": True}) < h2h(cars)
+
+
+CLASSIC_EXAMPLES = {
+    "centre_bands": """
+def reward_function(params):
+    width = params["track_width"]
+    off_centre = params["distance_from_center"]
+    near, mid, far = 0.1 * width, 0.25 * width, 0.5 * width
+    if off_centre <= near:
+        return 1.0
+    elif off_centre <= mid:
+        return 0.5
+    elif off_centre <= far:
+        return 0.1
+    return 1e-3
+""",
+    "wheels_and_speed": """
+def reward_function(params):
+    SLOW = 0.5
+    reward = 1e-3
+    if params["all_wheels_on_track"] and params["speed"] >= SLOW:
+        reward = 1.0
+    return float(reward)
+""",
+    "steering_penalty": """
+def reward_function(params):
+    width = params["track_width"]
+    reward = 1.0 if params["distance_from_center"] <= 0.25 * width else 0.2
+    if abs(params["steering_angle"]) > 15:
+        reward *= 0.8
+    return float(reward)
+""",
+    "waypoint_heading": """
+import math
+
+def reward_function(params):
+    points = params["waypoints"]
+    behind, ahead = params["closest_waypoints"]
+    dx = points[ahead][0] - points[behind][0]
+    dy = points[ahead][1] - points[behind][1]
+    track_heading = math.degrees(math.atan2(dy, dx))
+    error = abs(track_heading - params["heading"])
+    if error > 180:
+        error = 360 - error
+    reward = 1.0
+    if error > 10.0:
+        reward *= 0.5
+    return float(reward)
+""",
+}
+
+
+@pytest.mark.parametrize("name", sorted(CLASSIC_EXAMPLES))
+def test_classic_deepracer_examples_run_unchanged(env_params, tmp_path: Path, name: str) -> None:
+    path = tmp_path / f"{name}.py"
+    path.write_text(CLASSIC_EXAMPLES[name])
+    fn = load_reward_function(path)
+    for race_type in RACE_TYPES:
+        for params in env_params[race_type]:
+            assert 0.0 < fn(params) <= 1.0
+
+
+BROKEN = {
+    "syntax": ("def reward_function(params)\n    return 1.0\n", "syntax error at line 1"),
+    "missing_function": ("def reward(params):\n    return 1.0\n", "does not define"),
+    "not_callable": ("reward_function = 1.0\n", "must be a function, got float"),
+    "no_argument": ("def reward_function():\n    return 1.0\n", "exactly one argument"),
+    "two_arguments": ("def reward_function(params, more):\n    return 1.0\n", "exactly one"),
+    "raises": (
+        "def reward_function(params):\n    return params['lap_time'] * 2\n",
+        "raised KeyError: 'lap_time' at line 2",
+    ),
+    "import_fails": ("import not_a_module_here\n", "ModuleNotFoundError"),
+    "returns_text": ("def reward_function(params):\n    return 'fast'\n", "must return a number"),
+    "returns_none": ("def reward_function(params):\n    pass\n", "got NoneType"),
+    "returns_nan": ("def reward_function(params):\n    return float('nan')\n", "finite"),
+    "returns_huge": ("def reward_function(params):\n    return 1e6\n", "within +-100000"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BROKEN))
+def test_broken_files_give_clear_errors(tmp_path: Path, case: str) -> None:
+    source, expected = BROKEN[case]
+    path = tmp_path / "reward.py"
+    path.write_text(source)
+    with pytest.raises(RewardFunctionError) as info:
+        load_reward_function(path)
+    assert expected in str(info.value)
+    assert str(path) in str(info.value)
+
+
+def test_missing_file_and_unknown_sample(tmp_path: Path) -> None:
+    with pytest.raises(RewardFunctionError, match="does not exist"):
+        load_reward_function(tmp_path / "nowhere.py")
+    with pytest.raises(RewardFunctionError, match="follow_center_line"):
+        load_sample("warp_drive")
+
+
+def test_object_race_smoke_test_catches_object_only_functions(tmp_path: Path) -> None:
+    path = tmp_path / "boxes.py"
+    path.write_text("def reward_function(params):\n    return len(params['objects_location'])\n")
+    with pytest.raises(RewardFunctionError, match="objects_location"):
+        load_reward_function(path)
+    assert load_reward_function(path, "object_avoidance")(sample_params("object_avoidance")) == 2
+
+
+def test_check_does_not_let_the_function_mutate_params() -> None:
+    def greedy(params: dict) -> float:
+        params["waypoints"].clear()
+        params["speed"] = 99.0
+        return 1.0
+
+    params = sample_params()
+    waypoints = len(params["waypoints"])
+    assert check_reward_function(greedy, params) == 1.0
+    assert len(params["waypoints"]) == waypoints and params["speed"] == 1.5
