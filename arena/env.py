@@ -64,6 +64,15 @@ class _Bot:
     next_change: float
 
 
+@dataclass(frozen=True)
+class _Scene:
+    """Objects on track at one instant, with the controlled car each belongs to (if any)."""
+
+    objects: ObjectsView
+    boxes: list[Box3D]
+    owners: list[str | None]
+
+
 @dataclass
 class _Live:
     """One controlled car's simulation objects and last measurements."""
@@ -221,6 +230,7 @@ class RacingEnv(ParallelEnv):
             self._cars[agent] = _Live(car, record, last_point=point)
         self._lidar = Lidar(client)
         self._car_episodes = dict.fromkeys(self.possible_agents, 0)
+        self._scene_cache: _Scene | None = None
         self._body_owner = {live.car.body_id: a for a, live in self._cars.items()}
         self._bot_bodies = {bot.car.body_id for bot in self._bots}
         self._obstacle_bodies = {o.body: o for o in self._obstacles}
@@ -245,6 +255,7 @@ class RacingEnv(ParallelEnv):
                 live.car.apply_command(steer, speed)
         self._drive_bots()
         world.step(self._client, self._physics)
+        self._scene_cache = None
         self.time += self.config.control_dt
         for agent in self.agents:
             hold = self._cars[agent].hold
@@ -403,49 +414,59 @@ class RacingEnv(ParallelEnv):
         live.last_point = live.car.model_point()
         live.record = self._rules.start(self._arc_of(live.last_point), self.time)
         live.hold, live.parked, live.command = None, False, (0.0, 0.0)
+        self._scene_cache = None
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
         observation = self._observe_one(agent)
         return observation, self._info(agent, self._initial_params(agent))
 
     # ------------------------------------------------------------ observations
-    def _objects_view(self, exclude: str) -> ObjectsView:
-        """Obstacles, bots and the other cars still racing, as DeepRacer's object keys see them."""
-        locations, headings, speeds = [], [], []
+    def _scene(self) -> _Scene:
+        """Every object on track now (obstacles, bots, racing cars), computed once a step."""
+        if self._scene_cache is not None:
+            return self._scene_cache
+        owners: list[str | None] = []
+        locations, headings, speeds, boxes = [], [], [], []
         for o in self._obstacles:
+            owners.append(None)
             locations.append((o.place.x, o.place.y))
             headings.append(math.degrees(o.place.yaw))
             speeds.append(0.0)
-        movers = [b.car for b in self._bots] + [
-            self._cars[a].car
+            boxes.append(Box3D(o.place.x, o.place.y, o.place.yaw, *o.size, gray=BOX_GRAY))
+        spec = CarSpec()
+        movers = [(None, b.car, BOT_GRAY) for b in self._bots] + [
+            (a, self._cars[a].car, CAR_GRAY)
             for a in self.possible_agents
-            if a != exclude and not self._cars[a].parked
+            if not self._cars[a].parked
         ]
-        for car in movers:
-            s = car.state()
+        for owner, car, gray in movers:
+            state = car.state()
+            owners.append(owner)
             locations.append(tuple(car.model_point()))
-            headings.append(math.degrees(s.yaw))
-            speeds.append(abs(s.speed))
-        if not locations:
-            return ObjectsView.empty(self.track)
-        loc = np.array(locations, dtype=float)
-        heading = (np.array(headings) + 180.0) % 360.0 - 180.0
-        return ObjectsView(loc, heading, np.array(speeds), self.track.project(loc))
+            headings.append(math.degrees(state.yaw))
+            speeds.append(abs(state.speed))
+            cx, cy = car.footprint().mean(axis=0)
+            boxes.append(Box3D(cx, cy, state.yaw, spec.length, spec.width, spec.height, gray))
+        if locations:
+            loc = np.array(locations, dtype=float)
+            heading = (np.array(headings) + 180.0) % 360.0 - 180.0
+            view = ObjectsView(loc, heading, np.array(speeds), self.track.project(loc))
+        else:
+            view = ObjectsView.empty(self.track)
+        self._scene_cache = _Scene(view, boxes, owners)
+        return self._scene_cache
+
+    def _objects_view(self, exclude: str) -> ObjectsView:
+        """Obstacles, bots and the other cars still racing, as DeepRacer's object keys see them."""
+        scene = self._scene()
+        if exclude not in scene.owners:
+            return scene.objects
+        return scene.objects.without(scene.owners.index(exclude))
 
     def _boxes(self, exclude: str) -> list[Box3D]:
-        boxes = [
-            Box3D(o.place.x, o.place.y, o.place.yaw, o.size[0], o.size[1], o.size[2], BOX_GRAY)
-            for o in self._obstacles
+        scene = self._scene()
+        return [
+            box for box, owner in zip(scene.boxes, scene.owners, strict=True) if owner != exclude
         ]
-        spec = CarSpec()
-        cars = [(b.car, BOT_GRAY) for b in self._bots] + [
-            (self._cars[a].car, CAR_GRAY)
-            for a in self.possible_agents
-            if a != exclude and not self._cars[a].parked
-        ]
-        for car, gray in cars:
-            cx, cy = car.footprint().mean(axis=0)
-            boxes.append(Box3D(cx, cy, car.state().yaw, spec.length, spec.width, spec.height, gray))
-        return boxes
 
     def _observe(self) -> dict[str, dict[str, np.ndarray]]:
         return {agent: self._observe_one(agent) for agent in self.agents}

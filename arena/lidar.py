@@ -134,6 +134,7 @@ class Lidar:
         self.beam_angles = np.linspace(-half, half, num_beams)
         self.beam_angles.setflags(write=False)
         self._shapes: dict[int, _BodyShapes] = {}
+        self._exits: dict[tuple[int, ...], np.ndarray] = {}
 
     def scan(
         self,
@@ -161,7 +162,7 @@ class Lidar:
                 self.mount_height,
             ]
         )
-        start = self._own_body_exit(origin, dirs, exclude) if exclude else np.zeros(len(dirs))
+        start = self._start_distances(origin, dirs, tuple(exclude))
         starts = origin + dirs * start[:, None]
         ends = origin + dirs * self.max_range
         results = p.rayTestBatch(starts, ends, numThreads=1, physicsClientId=self.client)
@@ -172,6 +173,22 @@ class Lidar:
             noise = rng.normal(0.0, noise_std, ranges.shape)
             ranges = np.where(fraction < 1.0, ranges + noise, ranges)
         return np.clip(ranges, self.min_range, self.max_range).astype(np.float32)
+
+    def _start_distances(
+        self, origin: np.ndarray, dirs: np.ndarray, exclude: tuple[int, ...]
+    ) -> np.ndarray:
+        """Where each beam leaves the excluded bodies, cached per set of bodies.
+
+        The excluded body is the scanning car itself, rigid around its mount and driving
+        on flat ground, so the exit distances along the (car-relative) beams do not
+        change from scan to scan; they are measured once at the first scan.
+        """
+        if not exclude:
+            return np.zeros(len(dirs))
+        cached = self._exits.get(exclude)
+        if cached is None:
+            cached = self._exits[exclude] = self._own_body_exit(origin, dirs, exclude)
+        return cached
 
     def _own_body_exit(
         self, origin: np.ndarray, dirs: np.ndarray, exclude: Sequence[int]

@@ -7,7 +7,7 @@ the race has other objects (obstacles, bots or other cars).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -35,6 +35,16 @@ class ObjectsView:
 
     def __len__(self) -> int:
         return len(self.location)
+
+    def without(self, index: int) -> ObjectsView:
+        """The same objects less the one at ``index`` (a car does not see itself)."""
+        keep = np.arange(len(self)) != index
+        projection = Projection(
+            **{f.name: getattr(self.projection, f.name)[keep] for f in fields(Projection)}
+        )
+        return ObjectsView(
+            self.location[keep], self.heading_deg[keep], self.speed[keep], projection
+        )
 
 
 def heading_degrees(yaw: float) -> float:
