@@ -5,6 +5,7 @@ from __future__ import annotations
 import typer
 
 from arena.cli import race_command
+from league.league_cli import app as league_app
 from submissions.cli import app as model_app
 from tracks.cli import app as tracks_app
 
@@ -16,6 +17,7 @@ app = typer.Typer(
 )
 app.add_typer(tracks_app, name="tracks", help="Tracks: list, show, import, racing line.")
 app.add_typer(model_app, name="model", help="Model files: validate, inspect, pre-flight.")
+app.add_typer(league_app, name="league", help="The league: server, racers, events, standings.")
 app.command("race", help="Race built-in drivers on a track.")(race_command)
 
 

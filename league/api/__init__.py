@@ -1,0 +1,1 @@
+"""HTTP routers of the league API, one module per resource."""

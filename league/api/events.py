@@ -1,0 +1,172 @@
+"""``/api/events``: create events (admins), read them, enter models, read leaderboards."""
+
+from __future__ import annotations
+
+import threading
+from typing import Annotated
+
+from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
+from fastapi.concurrency import run_in_threadpool
+from sqlalchemy import select
+
+from league import crud
+from league.api.deps import SessionDep
+from league.auth import AdminRacer, CurrentRacer
+from league.models import Event, Model, utcnow
+from league.ranking import Standing
+from league.schemas import (
+    MAX_ID,
+    EntryAccepted,
+    EntryCreate,
+    ErrorOut,
+    EventCreate,
+    EventOut,
+    Leaderboard,
+    LeaderboardRow,
+)
+
+router = APIRouter(prefix="/api/events", tags=["events"])
+EventId = Annotated[int, Path(ge=1, le=MAX_ID)]
+NOT_FOUND = {404: {"model": ErrorOut, "description": "No such event"}}
+
+
+def event_out(event: Event) -> EventOut:
+    """The API view of an event, with its status now."""
+    return EventOut.model_validate(event, from_attributes=True)
+
+
+def get_event(session: SessionDep, event_id: int) -> Event:
+    """The event or a 404."""
+    event = session.get(Event, event_id)
+    if event is None:
+        raise HTTPException(404, f"Event {event_id} not found.")
+    return event
+
+
+@router.post("", status_code=201, response_model=EventOut, responses={422: {"model": ErrorOut}})
+def create_event(body: EventCreate, session: SessionDep, admin: AdminRacer) -> EventOut:
+    """Create an event (admins only); its ruleset is frozen from now on."""
+    try:
+        event = crud.create_event(session, body, admin.id)
+    except ValueError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return event_out(event)
+
+
+@router.get("", response_model=list[EventOut])
+def list_events(
+    session: SessionDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
+) -> list[EventOut]:
+    """Events, newest first."""
+    query = select(Event).order_by(Event.id.desc()).limit(limit).offset(offset)
+    return [event_out(e) for e in session.scalars(query)]
+
+
+@router.get("/{event_id}", response_model=EventOut, responses=NOT_FOUND)
+def read_event(event_id: EventId, session: SessionDep) -> EventOut:
+    """One event with its frozen ruleset."""
+    return event_out(get_event(session, event_id))
+
+
+@router.post(
+    "/{event_id}/entries",
+    status_code=202,
+    response_model=EntryAccepted,
+    responses={**NOT_FOUND, 409: {"model": ErrorOut, "description": "Closed or entered"}},
+)
+def enter_event(
+    event_id: EventId, body: EntryCreate, racer: CurrentRacer, session: SessionDep
+) -> EntryAccepted:
+    """Enter one of your models; evaluation jobs are queued (one per seed of the event)."""
+    event = get_event(session, event_id)
+    model = session.get(Model, body.model_id)
+    if model is None or model.owner_id != racer.id:
+        raise HTTPException(404, f"Model {body.model_id} is not one of your models.")
+    try:
+        entry, jobs = crud.enter_model(session, event, model, utcnow())
+    except crud.Conflict as exc:
+        raise HTTPException(409, str(exc)) from None
+    return EntryAccepted(
+        entry_id=entry.id, event_id=event.id, model_id=model.id, job_ids=[j.id for j in jobs]
+    )
+
+
+class LeaderboardCache:
+    """Serialised leaderboards per event, valid while the event's results_version holds."""
+
+    def __init__(self) -> None:
+        self._items: dict[int, tuple[int, bytes]] = {}
+        self._lock = threading.Lock()
+
+    def get(self, event_id: int, version: int) -> bytes | None:
+        """The cached body if it was built at ``version``."""
+        item = self._items.get(event_id)
+        return item[1] if item is not None and item[0] == version else None
+
+    def put(self, event_id: int, version: int, body: bytes) -> None:
+        """Remember a body built at ``version``."""
+        with self._lock:
+            self._items[event_id] = (version, body)
+
+
+def _row(standing: Standing) -> LeaderboardRow:
+    r, skill = standing.result, standing.skill
+    return LeaderboardRow(
+        rank=standing.rank,
+        alias=r.alias,
+        model_id=r.model_id,
+        model_name=r.model_name,
+        race_id=r.race_id,
+        status=r.status,
+        lap_count=r.laps,
+        best_lap_ms=r.best_ms,
+        average_lap_ms=r.average_ms,
+        total_time_ms=r.total_ms,
+        off_track_count=r.off_track_count,
+        collision_count=r.crash_count,
+        reset_count=r.reset_count,
+        ranking_score_ms=standing.score_ms,
+        submission_count=standing.submissions,
+        mu=skill.mu if skill else None,
+        sigma=skill.sigma if skill else None,
+        ordinal=skill.ordinal if skill else None,
+    )
+
+
+def _results_version(request: Request, event_id: int) -> int | None:
+    with request.app.state.engine.connect() as connection:
+        query = select(Event.results_version).where(Event.id == event_id)
+        return connection.execute(query).scalar()
+
+
+def _build_leaderboard(request: Request, event_id: int) -> tuple[int, bytes]:
+    with request.app.state.session_factory() as session:
+        event = get_event(session, event_id)
+        board = Leaderboard(
+            event_id=event.id,
+            race_type=event.race_type,
+            ranking_metric=event.ranking_metric,
+            rows=[_row(s) for s in crud.leaderboard(session, event)],
+        )
+        return event.results_version, board.model_dump_json().encode()
+
+
+@router.get("/{event_id}/leaderboard", response_model=Leaderboard, responses=NOT_FOUND)
+async def read_leaderboard(event_id: EventId, request: Request) -> Response:
+    """Standings: rank, alias, laps, best / average / total lap time, incidents, score,
+    submissions; head-to-head events add mu, sigma and the conservative ordinal.
+
+    Served from a per-process cache while the event's results_version is unchanged (one
+    primary-key read, on the event loop); a miss rebuilds it in the thread pool.
+    """
+    version = _results_version(request, event_id)
+    if version is None:
+        raise HTTPException(404, f"Event {event_id} not found.")
+    cache: LeaderboardCache = request.app.state.leaderboards
+    body = cache.get(event_id, version)
+    if body is None:
+        version, body = await run_in_threadpool(_build_leaderboard, request, event_id)
+        cache.put(event_id, version, body)
+    return Response(content=body, media_type="application/json")

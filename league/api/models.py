@@ -1,0 +1,114 @@
+"""``/api/models``: upload a submission (validated by ``submissions``) and read models."""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated
+
+from fastapi import APIRouter, File, Form, HTTPException, Path, Response, UploadFile
+from fastapi.responses import JSONResponse
+from sqlalchemy import select
+
+from league import crud
+from league.api.deps import SessionDep, SettingsDep, StorageDep
+from league.auth import CurrentRacer, OptionalRacer
+from league.models import Model, Racer
+from league.schemas import MAX_ID, ErrorOut, ModelOut
+from submissions import Limits, validate
+
+router = APIRouter(prefix="/api/models", tags=["models"])
+ModelId = Annotated[int, Path(ge=1, le=MAX_ID)]
+NAME = re.compile(r"^[A-Za-z0-9_.\- ]{1,64}$")
+
+
+def model_out(model: Model, owner_view: bool) -> ModelOut:
+    """The API view of a model: everything for its owner, the public fields otherwise."""
+    info = model.info
+    private = {"sha256": model.sha256, "size": model.size, "info": info} if owner_view else {}
+    return ModelOut(
+        id=model.id,
+        name=model.name,
+        owner=model.owner.alias,
+        visibility="owner" if owner_view else "public",
+        action_space_type=str(info.get("action_space", {}).get("type", "unknown")),
+        sensors=list(info.get("sensors", [])),
+        created_at=model.created_at,
+        **private,
+    )
+
+
+def _name(given: str | None, filename: str | None) -> str:
+    if given is not None:
+        if not NAME.match(given):
+            raise HTTPException(
+                422, "A model name is 1-64 letters, digits, spaces, '_', '.' or '-'."
+            )
+        return given
+    stem = re.sub(r"[^A-Za-z0-9_.\-]", "_", (filename or "model").rsplit(".", 1)[0])[:64]
+    return stem or "model"
+
+
+@router.post(
+    "",
+    status_code=201,
+    response_model=ModelOut,
+    responses={
+        200: {"model": ModelOut, "description": "The same file was uploaded before"},
+        413: {"model": ErrorOut, "description": "File too large"},
+        422: {"model": ErrorOut, "description": "The validator's problems"},
+    },
+)
+def upload_model(
+    file: Annotated[UploadFile, File(description="A submission archive (.zip)")],
+    racer: CurrentRacer,
+    session: SessionDep,
+    settings: SettingsDep,
+    storage: StorageDep,
+    response: Response,
+    name: Annotated[str | None, Form(description="Display name; default: the file name")] = None,
+) -> ModelOut | JSONResponse:
+    """Upload a model. It is validated; the same file twice gives the same model (200)."""
+    model_name = _name(name, file.filename)
+    data = file.file.read(settings.max_upload_bytes + 1)
+    if len(data) > settings.max_upload_bytes:
+        raise HTTPException(
+            413, f"The model file is larger than the limit of {settings.max_upload_bytes} bytes."
+        )
+    report = validate(data, Limits(max_archive_bytes=settings.max_upload_bytes))
+    if not report.ok or report.info is None:
+        count = len(report.problems)
+        return JSONResponse(
+            status_code=422,
+            content={
+                "detail": f"The model file was refused: {count} problem(s) found.",
+                "problems": [p.model_dump() for p in report.problems],
+            },
+        )
+    model, new = crud.add_model(session, storage, racer, model_name, data, report.info)
+    if not new:
+        response.status_code = 200
+    return model_out(model, owner_view=True)
+
+
+@router.get("", response_model=list[ModelOut])
+def list_models(racer: CurrentRacer, session: SessionDep) -> list[ModelOut]:
+    """Your models (admins see everyone's), newest first."""
+    query = select(Model).order_by(Model.id.desc())
+    if racer.role != "admin":
+        query = query.where(Model.owner_id == racer.id)
+    return [model_out(m, owner_view=True) for m in session.scalars(query)]
+
+
+@router.get("/{model_id}", response_model=ModelOut, responses={404: {"model": ErrorOut}})
+def read_model(model_id: ModelId, racer: OptionalRacer, session: SessionDep) -> ModelOut:
+    """A model: in full for its owner or an admin; public fields of an entered model else."""
+    model = session.get(Model, model_id)
+    if model is not None and _owns(racer, model):
+        return model_out(model, owner_view=True)
+    if model is not None and crud.is_entered(session, model.id):
+        return model_out(model, owner_view=False)
+    raise HTTPException(404, f"Model {model_id} not found.")
+
+
+def _owns(racer: Racer | None, model: Model) -> bool:
+    return racer is not None and (racer.role == "admin" or racer.id == model.owner_id)

@@ -1,0 +1,306 @@
+"""Database operations shared by the API, the CLI and (later) the scheduler and workers."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from datetime import datetime
+from typing import TYPE_CHECKING
+
+from sqlalchemy import func, select, update
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from arena.config import RaceConfig
+from league import ranking
+from league.auth import hash_token, new_token
+from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, Rating, utcnow
+from league.schemas import EventCreate
+from league.storage import Storage
+from submissions import ModelInfo
+from tracks.catalog import builtin_names, get_track
+
+if TYPE_CHECKING:
+    from arena.race import RaceResult
+
+
+class Conflict(ValueError):
+    """The request clashes with what is stored (a duplicate, a closed event)."""
+
+
+def create_racer(session: Session, alias: str, admin: bool = False) -> tuple[Racer, str]:
+    """Add a racer; return it and its API token (the only time the token is seen)."""
+    token = new_token()
+    racer = Racer(alias=alias, role="admin" if admin else "racer", token_hash=hash_token(token))
+    session.add(racer)
+    try:
+        session.commit()
+    except IntegrityError:
+        session.rollback()
+        raise Conflict(f"The alias {alias!r} is already taken.") from None
+    return racer, token
+
+
+def event_config(spec: EventCreate) -> RaceConfig:
+    """The event's ruleset as a race config with placeholder cars (``ConfigError`` if bad)."""
+    if spec.track not in builtin_names():
+        get_track(spec.track)  # raises a readable error for an unknown track
+    cars = [{"name": "car0"}, {"name": "car1"}] if spec.race_type == "head_to_model" else None
+    fields = spec.model_dump(
+        include={
+            "track", "direction", "race_type", "laps", "penalties", "max_resets",
+            "time_limit_s", "obstacles", "bots",
+        },
+        exclude_none=True,
+    )  # fmt: skip
+    return RaceConfig.build(**fields, **({"cars": cars} if cars else {}))
+
+
+def create_event(session: Session, spec: EventCreate, created_by: int | None) -> Event:
+    """Freeze the ruleset and store the event (``ValueError`` with a reason if invalid)."""
+    config = event_config(spec)
+    opens_at = spec.opens_at or utcnow()
+    if spec.closes_at is not None and spec.closes_at <= opens_at:
+        raise ValueError("closes_at must be later than opens_at")
+    if spec.round_interval_s is not None and spec.race_type != "head_to_model":
+        raise ValueError("round_interval_s is for head_to_model events only")
+    event = Event(
+        name=spec.name,
+        race_type=spec.race_type,
+        track=spec.track,
+        direction=spec.direction,
+        ranking_metric=spec.ranking_metric,
+        ruleset=config.ruleset(),
+        ruleset_hash=config.ruleset_hash(),
+        seeds=list(dict.fromkeys(spec.seeds)),
+        opens_at=opens_at,
+        closes_at=spec.closes_at,
+        round_interval_s=spec.round_interval_s,
+        next_round_at=opens_at if spec.round_interval_s else None,
+        created_by=created_by,
+    )
+    session.add(event)
+    session.commit()
+    return event
+
+
+def add_model(
+    session: Session, storage: Storage, owner: Racer, name: str, data: bytes, info: ModelInfo
+) -> tuple[Model, bool]:
+    """Store a validated archive and its row; return the model and whether it is new.
+
+    The file is fsynced and renamed into place before the row commits; if the commit fails
+    a file this call created is removed again, so a failure leaves neither behind.
+    """
+    existing = session.scalar(
+        select(Model).where(Model.owner_id == owner.id, Model.sha256 == info.archive_sha256)
+    )
+    if existing is not None:
+        return existing, False
+    sha256, created = storage.put("models", data)
+    try:
+        model = Model(
+            owner_id=owner.id,
+            name=name,
+            sha256=sha256,
+            size=len(data),
+            info=json.loads(info.model_dump_json()),
+        )
+        session.add(model)
+        session.commit()
+    except BaseException:
+        session.rollback()
+        if created and session.scalar(select(Model.id).where(Model.sha256 == sha256)) is None:
+            storage.remove("models", sha256)
+        raise
+    return model, True
+
+
+def is_entered(session: Session, model_id: int) -> bool:
+    """True once a model has been entered in any event (its public fields become visible)."""
+    return session.scalar(select(Entry.id).where(Entry.model_id == model_id).limit(1)) is not None
+
+
+def enter_model(
+    session: Session, event: Event, model: Model, now: datetime
+) -> tuple[Entry, list[Job]]:
+    """Enter ``model`` in ``event``; queue one evaluation job per seed (none head-to-head)."""
+    if not event.is_open(now):
+        raise Conflict(f"Event {event.id} is not open for entries.")
+    entry = Entry(event_id=event.id, model_id=model.id, racer_id=model.owner_id)
+    session.add(entry)
+    try:
+        session.flush()
+    except IntegrityError:
+        session.rollback()
+        raise Conflict(f"Model {model.id} is already entered in event {event.id}.") from None
+    jobs = []
+    if event.race_type != "head_to_model":
+        jobs = [Job(event_id=event.id, entry_id=entry.id, seed=seed) for seed in event.seeds]
+        session.add_all(jobs)
+    session.execute(
+        update(Event).where(Event.id == event.id).values(results_version=Event.results_version + 1)
+    )
+    session.commit()
+    return entry, jobs
+
+
+def record_race(
+    session: Session,
+    storage: Storage,
+    event: Event,
+    result: RaceResult,
+    entries: Mapping[str, Entry],
+    job: Job | None = None,
+) -> Race:
+    """Store a finished race: config, per-car results (ms), trace file; mark ``job`` done.
+
+    ``entries`` maps car names to the entries that drove them (bots have none).
+    """
+    trace = json.dumps(
+        {"trace": result.trace, "bots": result.bots, "obstacles": result.obstacles},
+        separators=(",", ":"),
+    ).encode()
+    trace_sha, _ = storage.put("traces", trace)
+    race = Race(
+        event_id=event.id,
+        job_id=job.id if job else None,
+        ruleset_hash=result.config.ruleset_hash(),
+        seed=result.config.seed,
+        config=json.loads(result.config.to_json()),
+        summary={
+            "finish_order": result.finish_order,
+            "duration": result.duration,
+            "steps": result.steps,
+        },
+        trace_sha256=trace_sha,
+    )
+    for car in result.cars:
+        entry = entries.get(car.name)
+        race.cars.append(
+            RaceCar(
+                entry_id=entry.id if entry else None,
+                model_id=entry.model_id if entry else None,
+                car_name=car.name,
+                status=car.status,
+                laps=car.laps,
+                lap_times_ms=[_ms(t) for t in car.lap_times],
+                best_ms=_ms(car.best_lap),
+                average_ms=_ms(car.average_lap),
+                total_ms=_ms(car.total_time),
+                penalty_ms=_ms(car.penalty_seconds) or 0,
+                off_track_count=car.off_track_count,
+                crash_count=car.crash_count,
+                reset_count=car.reset_count,
+                distance_m=car.distance,
+                finish_position=car.finish_position,
+            )
+        )
+    session.add(race)
+    if job is not None:
+        job.status = "done"
+        job.lease_owner = None
+        job.lease_expires_at = None
+    session.execute(
+        update(Event).where(Event.id == event.id).values(results_version=Event.results_version + 1)
+    )
+    session.commit()
+    return race
+
+
+def rate_race(session: Session, race: Race) -> None:
+    """Update the head-to-head ratings of the models in ``race`` (Plackett-Luce)."""
+    cars = [c for c in race.cars if c.model_id is not None]
+    if len(cars) < 2:
+        return
+    held = {
+        r.model_id: r
+        for r in session.scalars(
+            select(Rating).where(
+                Rating.event_id == race.event_id, Rating.model_id.in_([c.model_id for c in cars])
+            )
+        )
+    }
+    start = ranking.initial_skill()
+    skills = [
+        ranking.Skill(held[c.model_id].mu, held[c.model_id].sigma, held[c.model_id].races)
+        if c.model_id in held
+        else start
+        for c in cars
+    ]
+    updated = ranking.rate(skills, [c.finish_position for c in cars])
+    for car, skill in zip(cars, updated, strict=True):
+        row = held.get(car.model_id) or Rating(event_id=race.event_id, model_id=car.model_id)
+        row.mu, row.sigma, row.races = skill.mu, skill.sigma, skill.races
+        session.add(row)
+    session.execute(
+        update(Event)
+        .where(Event.id == race.event_id)
+        .values(results_version=Event.results_version + 1)
+    )
+    session.commit()
+
+
+def leaderboard(session: Session, event: Event) -> list[ranking.Standing]:
+    """The event's standings from its stored results, entries and ratings."""
+    rows = session.execute(
+        select(RaceCar, Race.id, Entry.racer_id, Racer.alias, Model.name)
+        .join(Race, RaceCar.race_id == Race.id)
+        .join(Entry, RaceCar.entry_id == Entry.id)
+        .join(Racer, Entry.racer_id == Racer.id)
+        .join(Model, Entry.model_id == Model.id)
+        .where(Race.event_id == event.id)
+    ).all()
+    results = [
+        ranking.Result(
+            racer_id=racer_id,
+            alias=alias,
+            model_id=car.model_id,
+            model_name=model_name,
+            race_id=race_id,
+            status=car.status,
+            laps=car.laps,
+            best_ms=car.best_ms,
+            average_ms=car.average_ms,
+            total_ms=car.total_ms,
+            off_track_count=car.off_track_count,
+            crash_count=car.crash_count,
+            reset_count=car.reset_count,
+            distance_m=car.distance_m,
+        )
+        for car, race_id, racer_id, alias, model_name in rows
+    ]
+    counts = dict(
+        session.execute(
+            select(Entry.racer_id, func.count(Entry.id))
+            .where(Entry.event_id == event.id)
+            .group_by(Entry.racer_id)
+        ).all()
+    )
+    skills = None
+    if event.race_type == "head_to_model":
+        skills = {
+            r.model_id: ranking.Skill(r.mu, r.sigma, r.races)
+            for r in session.scalars(select(Rating).where(Rating.event_id == event.id))
+        }
+        results += _unraced_entries(session, event, {r.model_id for r in results})
+    return ranking.standings(results, event.ranking_metric, counts, skills)
+
+
+def _unraced_entries(session: Session, event: Event, raced: set[int]) -> list[ranking.Result]:
+    """Head-to-head entries with no race yet, so that they show on the board."""
+    rows = session.execute(
+        select(Entry.racer_id, Entry.model_id, Racer.alias, Model.name)
+        .join(Racer, Entry.racer_id == Racer.id)
+        .join(Model, Entry.model_id == Model.id)
+        .where(Entry.event_id == event.id)
+    ).all()
+    return [
+        ranking.unraced(racer_id, alias, model_id, name)
+        for racer_id, model_id, alias, name in rows
+        if model_id not in raced
+    ]
+
+
+def _ms(seconds: float | None) -> int | None:
+    return None if seconds is None else round(seconds * 1000)

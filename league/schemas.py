@@ -1,0 +1,242 @@
+"""Request and response bodies of the league API (pydantic), as shown at ``/docs``.
+
+Times of races are whole milliseconds (``*_ms``); timestamps are ISO 8601 UTC.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+
+from arena.config import BotConfig, ObstacleConfig, Penalties
+from submissions import Problem
+
+MAX_ID = 2**31 - 1
+Alias = Annotated[str, Field(min_length=2, max_length=32, pattern=r"^[A-Za-z0-9_.\-]+$")]
+RaceType = Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"]
+Metric = Literal["total", "best", "average"]
+
+
+def _printable(value: str) -> str:
+    if not value.strip() or any(not ch.isprintable() for ch in value):
+        raise ValueError("must be non-blank printable text")
+    return value
+
+
+def _utc(value: datetime) -> datetime:
+    try:
+        return value.replace(tzinfo=UTC) if value.tzinfo is None else value.astimezone(UTC)
+    except (OverflowError, ValueError):
+        raise ValueError("is out of range once converted to UTC") from None
+
+
+Text = Annotated[str, Field(min_length=1), AfterValidator(_printable)]
+UtcTime = Annotated[datetime, AfterValidator(_utc)]
+
+
+class ErrorOut(BaseModel):
+    """Every error answer: a sentence for a person, plus details where there are any."""
+
+    detail: str
+    errors: list[dict[str, Any]] | None = None
+    problems: list[Problem] | None = None
+
+
+class _Out(BaseModel):
+    model_config = ConfigDict(from_attributes=True)
+
+
+# ------------------------------------------------------------------ racers
+class RacerCreate(BaseModel):
+    """A new racer (admins only)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    alias: Alias
+    admin: bool = False
+
+
+class RacerOut(_Out):
+    """A racer as others may see them."""
+
+    id: int
+    alias: str
+    role: str
+    created_at: datetime
+
+
+class RacerCreated(RacerOut):
+    """A new racer with their API token: shown once, never stored in clear."""
+
+    token: str
+
+
+# ------------------------------------------------------------------ models
+class ModelOut(BaseModel):
+    """A model. Owners and admins see everything; others only the public fields of a model
+    entered in an event (``sha256``, ``size`` and ``info`` are then null)."""
+
+    id: int
+    name: str
+    owner: str
+    visibility: Literal["owner", "public"]
+    action_space_type: str
+    sensors: list[str]
+    created_at: datetime
+    sha256: str | None = None
+    size: int | None = None
+    info: dict[str, Any] | None = None
+
+
+# ------------------------------------------------------------------ events
+class EventCreate(BaseModel):
+    """An event's ruleset and schedule; frozen once created."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: Annotated[Text, Field(max_length=100)]
+    race_type: RaceType = "time_trial"
+    track: Annotated[str, Field(min_length=1, max_length=64)] = "beginner_loop"
+    direction: Literal["ccw", "cw"] = "ccw"
+    laps: int = Field(default=3, ge=1, le=100)
+    ranking_metric: Metric = "total"
+    penalties: Penalties = Penalties()
+    max_resets: int | None = Field(default=None, ge=0, le=1000)
+    time_limit_s: float = Field(default=180.0, gt=0.0, le=3600.0, allow_inf_nan=False)
+    obstacles: ObstacleConfig | None = None
+    bots: BotConfig | None = None
+    seeds: list[Annotated[int, Field(ge=0, le=MAX_ID)]] = Field(
+        default_factory=lambda: [0], min_length=1, max_length=20
+    )
+    opens_at: UtcTime | None = None
+    closes_at: UtcTime | None = None
+    round_interval_s: int | None = Field(default=None, ge=60, le=30 * 86400)
+
+
+class EventOut(_Out):
+    """An event with its frozen ruleset."""
+
+    id: int
+    name: str
+    race_type: str
+    track: str
+    direction: str
+    ranking_metric: str
+    ruleset: dict[str, Any]
+    ruleset_hash: str
+    seeds: list[int]
+    opens_at: datetime
+    closes_at: datetime | None
+    round_interval_s: int | None
+    status: Literal["upcoming", "open", "closed"]
+    created_at: datetime
+
+
+class EntryCreate(BaseModel):
+    """Enter one of your models."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    model_id: int = Field(ge=1, le=MAX_ID)
+
+
+class EntryAccepted(BaseModel):
+    """An accepted entry and the evaluation jobs queued for it."""
+
+    entry_id: int
+    event_id: int
+    model_id: int
+    job_ids: list[int]
+
+
+class JobOut(_Out):
+    """One queued, running, finished or failed job."""
+
+    id: int
+    kind: str
+    event_id: int
+    entry_id: int | None
+    round: int | None
+    seed: int
+    status: str
+    attempts: int
+    error: str | None
+    race_id: int | None = None
+    created_at: datetime
+    updated_at: datetime
+
+
+# ------------------------------------------------------------------ leaderboards
+class LeaderboardRow(BaseModel):
+    """DeepRacer's leaderboard columns; times in ms; ratings for head-to-head events."""
+
+    rank: int
+    alias: str
+    model_id: int
+    model_name: str
+    race_id: int | None
+    status: str | None
+    lap_count: int
+    best_lap_ms: int | None
+    average_lap_ms: int | None
+    total_time_ms: int | None
+    off_track_count: int
+    collision_count: int
+    reset_count: int
+    ranking_score_ms: int | None
+    submission_count: int
+    mu: float | None = None
+    sigma: float | None = None
+    ordinal: float | None = None
+
+
+class Leaderboard(BaseModel):
+    """An event's standings: one row per racer, their best result counting."""
+
+    event_id: int
+    race_type: str
+    ranking_metric: str
+    rows: list[LeaderboardRow]
+
+
+# ------------------------------------------------------------------ races
+class RaceCarOut(_Out):
+    """One car's result with lap splits."""
+
+    car_name: str
+    alias: str | None = None
+    model_id: int | None
+    entry_id: int | None
+    status: str
+    laps: int
+    lap_times_ms: list[int]
+    best_ms: int | None
+    average_ms: int | None
+    total_ms: int | None
+    penalty_ms: int
+    off_track_count: int
+    crash_count: int
+    reset_count: int
+    distance_m: float
+    finish_position: int
+
+
+class RaceBrief(_Out):
+    """A race in a list."""
+
+    id: int
+    event_id: int
+    seed: int
+    ruleset_hash: str
+    created_at: datetime
+    has_trace: bool
+    cars: list[RaceCarOut]
+
+
+class RaceOut(RaceBrief):
+    """A race with the config it ran under and its summary (duration, steps, order)."""
+
+    config: dict[str, Any]
+    summary: dict[str, Any]

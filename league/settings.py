@@ -1,0 +1,39 @@
+"""League server settings: pydantic-settings read from ``SLIPSTREAM_*`` environment variables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+MiB = 1024 * 1024
+
+
+class Settings(BaseSettings):
+    """Everything the league server can be configured with; no hidden globals."""
+
+    model_config = SettingsConfigDict(env_prefix="SLIPSTREAM_", extra="ignore")
+
+    data_dir: Path = Field(default=Path("slipstream-data"), description="Database and files.")
+    database_url: str | None = Field(
+        default=None, description="SQLAlchemy URL; default: SQLite in the data directory."
+    )
+    max_upload_bytes: int = Field(default=50 * MiB, gt=0, description="Model upload cap.")
+    rate_limit_per_second: float = Field(
+        default=50.0, ge=0.0, description="Sustained requests per client; 0 turns limiting off."
+    )
+    rate_limit_burst: int = Field(default=200, gt=0, description="Requests a client may burst.")
+    sqlite_busy_timeout_ms: int = Field(default=5000, ge=0)
+
+    @property
+    def db_url(self) -> str:
+        """The database URL in use (the embedded SQLite file unless one was given)."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'league.db').resolve()}"
+
+    @property
+    def storage_dir(self) -> Path:
+        """Where content-addressed files (models, race traces) live."""
+        return self.data_dir / "files"
