@@ -9,6 +9,7 @@ shows what the rest of the step costs.
 from __future__ import annotations
 
 import argparse
+import os
 import resource
 import time
 import tracemalloc
@@ -99,9 +100,11 @@ def main() -> None:
             f"{m['step_ms'] / (1e3 * floors[cars]):.1f}",
             f"{m['mem_mb']:.1f}",
         )
-    Console().print(table)
+    console = Console(width=140)
+    console.print(table)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    Console().print(f"process peak RSS {rss:.0f} MB; settings: {settings}")
+    load = os.getloadavg()[0]
+    console.print(f"process peak RSS {rss:.0f} MB; 1-min load average {load:.1f}; {settings}")
 
 
 if __name__ == "__main__":
