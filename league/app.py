@@ -7,15 +7,19 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from league.api import events, health, jobs, models, racers, races
+from league.api import events, health, jobs, models, racers, races, tracks
 from league.api.events import LeaderboardCache
 from league.bodylimit import BodyLimitMiddleware
 from league.db import make_engine, make_session_factory
 from league.ratelimit import RateLimitMiddleware
 from league.settings import Settings
 from league.storage import Storage
+from league.web import STATIC_DIR
+from league.web import model_data as web_model_data
+from league.web import routes as web_routes
 
 log = logging.getLogger("league")
 MULTIPART_OVERHEAD = 64 * 1024
@@ -68,8 +72,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = make_session_factory(engine)
     app.state.storage = Storage(settings.storage_dir)
     app.state.leaderboards = LeaderboardCache()
-    for module in (health, racers, models, events, jobs, races):
+    for module in (health, racers, models, events, jobs, races, tracks, web_model_data):
         app.include_router(module.router)
+    app.include_router(web_routes.router)
+    app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     _install_error_handlers(app)
     body_cap = settings.max_upload_bytes + MULTIPART_OVERHEAD
     app.add_middleware(BodyLimitMiddleware, max_bytes=body_cap)

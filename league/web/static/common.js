@@ -1,0 +1,116 @@
+// Shared helpers for every page: the stored API token, JSON fetches, DOM building, formats.
+"use strict";
+
+const TOKEN_KEY = "slipstream.token";
+
+const Slip = {
+  token() {
+    return window.localStorage.getItem(TOKEN_KEY) || "";
+  },
+
+  // GET or send JSON / form data to the API; the stored token goes in a bearer header.
+  async api(path, options = {}) {
+    const headers = Object.assign({}, options.headers || {});
+    const token = Slip.token();
+    if (token) headers["Authorization"] = "Bearer " + token;
+    const response = await fetch(path, Object.assign({}, options, { headers }));
+    let body = null;
+    try {
+      body = await response.json();
+    } catch (err) {
+      body = null;
+    }
+    return { ok: response.ok, status: response.status, body };
+  },
+
+  // Build an element: el("td", {class: "x"}, "text", child, ...); text is never parsed as HTML.
+  el(tag, attrs, ...children) {
+    const node = document.createElement(tag);
+    for (const [key, value] of Object.entries(attrs || {})) {
+      if (value === null || value === undefined || value === false) continue;
+      if (key === "class") node.className = value;
+      else if (key === "style") node.style.cssText = value;
+      else node.setAttribute(key, value === true ? "" : value);
+    }
+    for (const child of children) {
+      if (child === null || child === undefined) continue;
+      node.append(child instanceof Node ? child : String(child));
+    }
+    return node;
+  },
+
+  // Milliseconds as m:ss.mmm (DeepRacer's lap-time format); "—" when missing.
+  ms(value) {
+    if (value === null || value === undefined) return "—";
+    const total = Math.round(value);
+    const minutes = Math.floor(total / 60000);
+    const seconds = ((total % 60000) / 1000).toFixed(3).padStart(6, "0");
+    return minutes + ":" + seconds;
+  },
+
+  duration(seconds) {
+    const s = Math.max(0, Math.floor(seconds));
+    const d = Math.floor(s / 86400);
+    const h = Math.floor((s % 86400) / 3600);
+    const m = Math.floor((s % 3600) / 60);
+    if (d > 0) return d + "d " + h + "h";
+    if (h > 0) return h + "h " + m + "m";
+    return m + "m " + String(s % 60).padStart(2, "0") + "s";
+  },
+
+  date(iso) {
+    return iso ? new Date(iso).toISOString().slice(0, 16).replace("T", " ") + " UTC" : "—";
+  },
+};
+
+// Countdowns: <span class="countdown" data-seconds="N"> ticks down once a second.
+function startCountdowns() {
+  const started = Date.now();
+  const nodes = Array.from(document.querySelectorAll(".countdown"));
+  const tick = () => {
+    const elapsed = (Date.now() - started) / 1000;
+    for (const node of nodes) {
+      node.textContent = Slip.duration(Number(node.dataset.seconds) - elapsed);
+    }
+  };
+  tick();
+  if (nodes.length) window.setInterval(tick, 1000);
+}
+
+// The token form in the header: save to / forget from localStorage, show who is signed in.
+async function showSignedIn() {
+  const who = document.getElementById("token-who");
+  const forget = document.getElementById("token-forget");
+  const input = document.getElementById("token-input");
+  const save = document.getElementById("token-save");
+  if (!Slip.token()) {
+    who.textContent = "not signed in";
+    forget.hidden = true;
+    input.hidden = save.hidden = false;
+    return;
+  }
+  const me = await Slip.api("/api/racers/me");
+  who.textContent = me.ok ? "signed in as " + me.body.alias : "token not accepted";
+  forget.hidden = false;
+  input.hidden = save.hidden = me.ok;
+}
+
+function setUpTokenForm() {
+  const form = document.getElementById("token-form");
+  form.addEventListener("submit", (event) => {
+    event.preventDefault();
+    const input = document.getElementById("token-input");
+    const value = input.value.trim();
+    if (value) window.localStorage.setItem(TOKEN_KEY, value);
+    input.value = "";
+    showSignedIn().then(() => document.dispatchEvent(new Event("slip-token")));
+  });
+  document.getElementById("token-forget").addEventListener("click", () => {
+    window.localStorage.removeItem(TOKEN_KEY);
+    showSignedIn().then(() => document.dispatchEvent(new Event("slip-token")));
+  });
+  showSignedIn();
+}
+
+setUpTokenForm();
+startCountdowns();
