@@ -1,0 +1,150 @@
+"""Evaluate a policy in race mode: results table, simtrace and replay files."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from rich.table import Table
+
+import arena
+from agents.networks import observation_groups
+from arena.actions import ContinuousActionSpace, DiscreteActionSpace
+from arena.config import RaceConfig
+from arena.race import RaceResult, run_race
+from arena.simtrace import race_rows, write_simtrace
+
+
+class TorchPolicy:
+    """Drives a car with an rsl-rl actor's deterministic output (``arena.policy.Policy``)."""
+
+    def __init__(self, actor: torch.nn.Module, discrete: bool) -> None:
+        self.actor = actor
+        self.discrete = discrete
+
+    def reset(self) -> None:
+        """Stateless: nothing to forget."""
+
+    def act(self, observation: dict[str, Any]) -> Any:
+        """Greedy action: an index (discrete) or two values in ``[-1, 1]``."""
+        groups = observation_groups({k: np.asarray(v)[None] for k, v in observation.items()})
+        with torch.inference_mode():
+            out = self.actor(groups.to(next(self.actor.parameters()).device))[0].cpu()
+        if self.discrete:
+            return int(out.argmax())
+        return out.clamp(-1.0, 1.0).numpy().astype(np.float32)
+
+
+def evaluation_config(
+    track: str,
+    race_type: str,
+    sensors: tuple[str, ...] | list[str],
+    action_space: DiscreteActionSpace | ContinuousActionSpace,
+    *,
+    laps: int = 3,
+    seed: int = 0,
+    time_limit_s: float = 180.0,
+    num_cars: int | None = None,
+) -> RaceConfig:
+    """A race-mode config for evaluating one trained policy."""
+    return arena.make_config(
+        track=track,
+        race_type=race_type,
+        num_cars=num_cars,
+        sensors=tuple(sensors),
+        action_space=action_space,
+        mode="race",
+        seed=seed,
+        laps=laps,
+        time_limit_s=time_limit_s,
+    )
+
+
+def evaluate_policy(
+    config: RaceConfig,
+    policy: Any,
+    replay_path: Path | None = None,
+    reward_function: Callable[[dict[str, Any]], float] | None = None,
+) -> RaceResult:
+    """Race ``policy`` in every car of ``config``; optionally write a replay GIF.
+
+    ``reward_function`` only fills the trace's reward column (default: follow the centre).
+    """
+    from arena.env import resolve_track
+    from arena.replay import ReplayWriter
+
+    writer = ReplayWriter(resolve_track(config)[0]) if replay_path is not None else None
+    policies = {car.name: policy for car in config.cars}
+    result = run_race(
+        config,
+        policies,
+        reward_functions=reward_function,
+        on_step=writer.add if writer else None,
+    )
+    if writer is not None and replay_path is not None:
+        replay_path.parent.mkdir(parents=True, exist_ok=True)
+        writer.save(replay_path)
+    return result
+
+
+def evaluation_dir(run_dir: Path) -> Path:
+    """A new ``RUN/evaluation-<YYYYMMDDHHMMSS>`` folder (one second later if taken)."""
+    stamp = datetime.now()
+    while True:
+        path = Path(run_dir) / f"evaluation-{stamp:%Y%m%d%H%M%S}"
+        if not path.exists():
+            path.mkdir(parents=True)
+            return path
+        stamp = datetime.fromtimestamp(stamp.timestamp() + 1)
+
+
+def write_evaluation(run_dir: Path, result: RaceResult, folder: Path | None = None) -> Path:
+    """Write the evaluation simtrace (first car) in deepracer-for-cloud's layout."""
+    folder = folder or evaluation_dir(run_dir)
+    car = result.config.cars[0].name
+    rows = race_rows(result, car, episode=0, wall_clock=time.time())
+    write_simtrace(folder / "evaluation-simtrace" / "0-iteration.csv", rows)
+    return folder
+
+
+def summary(result: RaceResult) -> dict[str, Any]:
+    """Headline numbers of the first car: laps, progress, best lap, incidents."""
+    car = result.car(result.config.cars[0].name)
+    progress = result.trace.get(car.name, {}).get("progress") or [0.0]
+    partial = 0.0 if car.status == "finished" else float(progress[-1]) / 100.0
+    return {
+        "laps": car.laps,
+        "progress": min(100.0, 100.0 * (car.laps + partial) / result.config.laps),
+        "best_lap": car.best_lap,
+        "total_time": car.total_time,
+        "off_track": car.off_track_count,
+        "crashes": car.crash_count,
+        "resets": car.reset_count,
+        "status": car.status,
+    }
+
+
+def results_table(result: RaceResult) -> Table:
+    """A Rich table: per car, laps and lap times, off-tracks, crashes, resets."""
+    table = Table(title=f"{result.config.track} - {result.config.race_type}")
+    for column in ("car", "status", "laps", "lap times (s)", "best", "total", "off", "crash"):
+        table.add_column(column)
+    table.add_column("resets")
+    for car in result.cars:
+        table.add_row(
+            car.name,
+            car.status,
+            str(car.laps),
+            ", ".join(f"{t:.2f}" for t in car.lap_times) or "-",
+            f"{car.best_lap:.2f}" if car.best_lap is not None else "-",
+            f"{car.total_time:.2f}" if car.total_time is not None else "-",
+            str(car.off_track_count),
+            str(car.crash_count),
+            str(car.reset_count),
+        )
+    return table

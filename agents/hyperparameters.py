@@ -1,0 +1,97 @@
+"""DeepRacer's training hyperparameters (``hyperparameters.json``) and their rsl-rl mapping.
+
+Key names and defaults follow the ``hyperparameters.json`` that deepracer-for-cloud writes
+for a model. :meth:`Hyperparameters.to_rsl_rl` turns them into rsl-rl's PPO and runner
+settings; ``docs/training.md`` lists what maps to what and what has no equivalent.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+# Fixed in DeepRacer's clipped-PPO preset (not user settings there either).
+PPO_CLIP = 0.2
+GAE_LAMBDA = 0.95
+# rsl-rl collects a fixed number of steps per slot, not whole episodes: an "episode" of
+# num_episodes_between_training is converted to steps with this estimate.
+STEPS_PER_EPISODE_ESTIMATE = 64
+
+
+class Hyperparameters(BaseModel):
+    """DeepRacer hyperparameters, by their ``hyperparameters.json`` names and defaults."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    batch_size: int = Field(default=64, ge=1, le=4096)
+    beta_entropy: float = Field(default=0.01, ge=0.0, le=1.0)
+    discount_factor: float = Field(default=0.999, ge=0.0, le=1.0)
+    e_greedy_value: float = Field(default=0.05, ge=0.0, le=1.0)
+    epsilon_steps: int = Field(default=10000, ge=0)
+    exploration_type: Literal["categorical", "additive_noise"] = "categorical"
+    loss_type: Literal["huber", "mean squared error"] = "huber"
+    lr: float = Field(default=3e-4, gt=0.0, le=1e-2)
+    num_episodes_between_training: int = Field(default=20, ge=1, le=1000)
+    num_epochs: int = Field(default=10, ge=1, le=100)
+    stack_size: Literal[1] = 1
+    term_cond_avg_score: float = 350.0
+    term_cond_max_episodes: int = Field(default=100000, ge=1)
+    sac_alpha: float = Field(default=0.2, ge=0.0)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Hyperparameters:
+        """Read a DeepRacer ``hyperparameters.json`` (unknown keys are refused)."""
+        return cls.model_validate_json(Path(path).read_text())
+
+    def write(self, run_dir: str | Path) -> Path:
+        """Write ``RUN/ip/hyperparameters.json`` with DeepRacer's key names."""
+        path = Path(run_dir) / "ip" / "hyperparameters.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.model_dump(), indent=2) + "\n")
+        return path
+
+    def steps_per_env(self, num_envs: int) -> int:
+        """Rollout length per slot that collects about ``num_episodes_between_training``."""
+        total = self.num_episodes_between_training * STEPS_PER_EPISODE_ESTIMATE
+        return max(8, math.ceil(total / max(1, num_envs)))
+
+    def to_rsl_rl(
+        self,
+        num_envs: int,
+        actor: dict[str, Any],
+        critic: dict[str, Any],
+        obs_groups: dict[str, list[str]],
+        num_steps_per_env: int | None = None,
+    ) -> dict[str, Any]:
+        """rsl-rl's ``OnPolicyRunner`` config for these hyperparameters and models."""
+        steps = num_steps_per_env or self.steps_per_env(num_envs)
+        mini_batches = max(1, round(steps * num_envs / self.batch_size))
+        return {
+            "num_steps_per_env": steps,
+            "save_interval": 10**9,  # checkpoints are written by agents.train
+            "obs_groups": obs_groups,
+            "logger": "tensorboard",
+            "multi_gpu": None,
+            "check_for_nan": True,
+            "algorithm": {
+                "class_name": "PPO",
+                "learning_rate": self.lr,
+                "num_learning_epochs": self.num_epochs,
+                "num_mini_batches": mini_batches,
+                "clip_param": PPO_CLIP,
+                "gamma": self.discount_factor,
+                "lam": GAE_LAMBDA,
+                "entropy_coef": self.beta_entropy,
+                "value_loss_coef": 1.0,
+                "use_clipped_value_loss": True,
+                "max_grad_norm": 1.0,
+                "schedule": "fixed",
+                "desired_kl": 0.01,
+            },
+            "actor": actor,
+            "critic": critic,
+        }

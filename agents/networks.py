@@ -1,0 +1,144 @@
+"""Network presets by DeepRacer name, as rsl-rl actor/critic model configs.
+
+Every sensor is its own observation group, named after the sensor: images arrive as
+``(C, H, W)`` float tensors in ``[0, 1]`` and go through rsl-rl's CNN encoders; 1D
+sensors (lidars) are concatenated with the CNN latent (``CNNModel``) or form the whole
+input (``MLPModel``).
+
+=================  ====================================================================
+preset             layers
+=================  ====================================================================
+``3-layer CNN``    conv 32/8/4, 64/4/2, 64/3/1 -> dense 512 (DeepRacer's
+                   ``DEEP_CONVOLUTIONAL_NETWORK_SHALLOW``), ReLU
+``5-layer CNN``    conv 32/5/2, 32/3/1, 64/3/2, 64/3/1, 128/3/2 -> dense 512
+                   (``DEEP_CONVOLUTIONAL_NETWORK``; layer sizes unverified), ReLU
+``dense 256-256``  dense 256, 256 (lidar and sector lidars), ReLU
+=================  ====================================================================
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+from tensordict import TensorDict
+
+from arena.actions import ContinuousActionSpace, DiscreteActionSpace
+from arena.sensors_spec import LidarConfig, check_sensors, sensor_space
+
+IMAGE_SENSORS = ("camera", "stereo")
+CATEGORICAL = "agents.distributions:CategoricalDistribution"
+
+_CNN_LAYERS: dict[str, tuple[list[int], list[int], list[int]]] = {
+    "3-layer CNN": ([32, 64, 64], [8, 4, 3], [4, 2, 1]),
+    "5-layer CNN": ([32, 32, 64, 64, 128], [5, 3, 3, 3, 3], [2, 1, 2, 1, 2]),
+}
+PRESETS: dict[str, dict[str, Any]] = {
+    "3-layer CNN": {"deepracer": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW", "hidden": [512]},
+    "5-layer CNN": {"deepracer": "DEEP_CONVOLUTIONAL_NETWORK", "hidden": [512]},
+    "dense 256-256": {"deepracer": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW", "hidden": [256, 256]},
+}
+
+
+def default_preset(sensors: tuple[str, ...] | list[str]) -> str:
+    """``3-layer CNN`` when a camera is fitted, else ``dense 256-256``."""
+    return "3-layer CNN" if any(s in IMAGE_SENSORS for s in sensors) else "dense 256-256"
+
+
+def check_preset(preset: str, sensors: tuple[str, ...] | list[str]) -> None:
+    """Refuse a preset that cannot read the sensors (raises ``ValueError``)."""
+    if preset not in PRESETS:
+        raise ValueError(f"unknown network preset {preset!r}; choose from {list(PRESETS)}")
+    has_camera = any(s in IMAGE_SENSORS for s in sensors)
+    if has_camera and preset not in _CNN_LAYERS:
+        raise ValueError(f"{preset!r} cannot read a camera; use '3-layer CNN' or '5-layer CNN'")
+    if not has_camera and preset in _CNN_LAYERS:
+        raise ValueError(f"{preset!r} needs a camera; use 'dense 256-256' for lidars")
+
+
+def deepracer_network_name(preset: str) -> str:
+    """The ``neural_network`` value written to ``model_metadata.json``."""
+    return PRESETS[preset]["deepracer"]
+
+
+def example_observations(
+    sensors: tuple[str, ...] | list[str], lidar: LidarConfig | None = None, batch: int = 1
+) -> TensorDict:
+    """Zero observations of the right group shapes (images as ``C x H x W`` floats)."""
+    groups = {}
+    for name in check_sensors(sensors):
+        shape = sensor_space(name, lidar).shape
+        if name in IMAGE_SENSORS:
+            shape = (shape[2], shape[0], shape[1])
+        groups[name] = torch.zeros((batch, *shape))
+    return TensorDict(groups, batch_size=[batch])
+
+
+def observation_groups(
+    arrays: dict[str, np.ndarray], device: str | torch.device = "cpu"
+) -> TensorDict:
+    """Batched raw sensor arrays as the policy's groups (images ``C x H x W`` in ``[0, 1]``)."""
+    groups = {}
+    for name, value in arrays.items():
+        data = torch.from_numpy(np.ascontiguousarray(value))
+        if name in IMAGE_SENSORS:
+            data = data.permute(0, 3, 1, 2).float().div(255.0)
+        groups[name] = data.float().to(device)
+    batch = next(iter(groups.values())).shape[0]
+    return TensorDict(groups, batch_size=[batch], device=device)
+
+
+def model_configs(
+    preset: str,
+    sensors: tuple[str, ...] | list[str],
+    action_space: DiscreteActionSpace | ContinuousActionSpace,
+) -> tuple[dict[str, Any], dict[str, Any], dict[str, list[str]]]:
+    """``(actor_cfg, critic_cfg, obs_groups)`` for rsl-rl's runner config."""
+    check_preset(preset, sensors)
+    names = list(check_sensors(sensors))
+    base: dict[str, Any] = {
+        "hidden_dims": list(PRESETS[preset]["hidden"]),
+        "activation": "relu",
+        "obs_normalization": False,
+    }
+    if preset in _CNN_LAYERS:
+        channels, kernels, strides = _CNN_LAYERS[preset]
+        base["class_name"] = "CNNModel"
+        base["cnn_cfg"] = {
+            "output_channels": channels,
+            "kernel_size": kernels,
+            "stride": strides,
+            "activation": "relu",
+            "flatten": True,
+        }
+    else:
+        base["class_name"] = "MLPModel"
+    if isinstance(action_space, DiscreteActionSpace):
+        distribution = {"class_name": CATEGORICAL}
+    else:
+        distribution = {"class_name": "GaussianDistribution", "init_std": 0.5}
+    actor = {**base, "distribution_cfg": distribution}
+    critic = dict(base)
+    return actor, critic, {"actor": names, "critic": names}
+
+
+def num_actions(action_space: DiscreteActionSpace | ContinuousActionSpace) -> int:
+    """Width of the actor's output: ``n`` one-hot entries, or 2 continuous values."""
+    return action_space.n if isinstance(action_space, DiscreteActionSpace) else 2
+
+
+def build_actor(
+    preset: str,
+    sensors: tuple[str, ...] | list[str],
+    action_space: DiscreteActionSpace | ContinuousActionSpace,
+    lidar: LidarConfig | None = None,
+) -> torch.nn.Module:
+    """A fresh actor model (outside a runner), e.g. to load a checkpoint for evaluation."""
+    from rsl_rl.utils import resolve_callable
+
+    actor_cfg, _, obs_groups = model_configs(preset, sensors, action_space)
+    cfg = dict(actor_cfg)
+    model_class = resolve_callable(cfg.pop("class_name"))
+    obs = example_observations(sensors, lidar)
+    return model_class(obs, obs_groups, "actor", num_actions(action_space), **cfg)

@@ -1,0 +1,416 @@
+"""``RacingVecEnv``: many ``RacingEnv`` races as one rsl-rl ``VecEnv``.
+
+Every learner-controlled car of every race is one rollout slot of the shared policy
+(self-play by parameter sharing). Races run in worker processes (pipes; ``num_workers=0``
+runs them in-process). Cars not driven by the learner (frozen opponents from
+:mod:`agents.selfplay`) act inside the workers and are not slots; bots and boxes come
+from the race config itself. Each worker loads the reward function by its path or
+sample name: functions never cross process boundaries.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from agents.networks import observation_groups
+from arena.actions import DiscreteActionSpace
+from arena.config import RaceConfig
+from arena.env import RacingEnv
+
+FAILED = ("off_track", "crashed", "reversed", "immobilized")
+
+
+def resolve_reward(spec: str, race_type: str = "time_trial") -> Callable[[dict[str, Any]], float]:
+    """Load a reward function from a ``.py`` file path or a bundled sample's name."""
+    from agents.rewards import load_reward_function, load_sample
+
+    if spec.endswith(".py") or os.sep in spec or Path(spec).exists():
+        return load_reward_function(spec, race_type)
+    return load_sample(spec, race_type)
+
+
+@dataclass
+class _Slot:
+    """Book-keeping for one learner car."""
+
+    index: int
+    env: int
+    car: str
+    episode: int = 0
+    steps: int = 0
+    reward: float = 0.0
+
+
+@dataclass
+class StepBatch:
+    """What a group of races returns after a step (numpy, slot order)."""
+
+    obs: dict[str, np.ndarray]
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    episodes: list[dict[str, Any]] = field(default_factory=list)
+
+
+class EnvGroup:
+    """Some races and their learner slots; runs inside a worker (or in-process)."""
+
+    def __init__(
+        self,
+        config_json: str,
+        reward: str,
+        seeds: list[int],
+        learner_cars: list[str],
+        record_simtrace: bool = True,
+    ) -> None:
+        config = RaceConfig.from_json(config_json)
+        reward_fn = resolve_reward(reward, config.race_type)
+        self.envs = [
+            RacingEnv(config.model_copy(update={"seed": s}), reward_functions=reward_fn)
+            for s in seeds
+        ]
+        self.learners = set(learner_cars)
+        pairs = [(i, car) for i in range(len(self.envs)) for car in learner_cars]
+        self.slots = [_Slot(k, i, car) for k, (i, car) in enumerate(pairs)]
+        self.discrete = isinstance(config.cars[0].action_space, DiscreteActionSpace)
+        self.record_simtrace = record_simtrace
+        self.rows: list[dict[str, Any]] = []
+        self.opponents: dict[int, tuple[str, Any]] = {}
+        self.last_obs: dict[tuple[int, str], dict[str, np.ndarray]] = {}
+        self.last_info: dict[tuple[int, str], dict[str, Any]] = {}
+
+    def reset(self) -> StepBatch:
+        """Reset every race; returns the first observations."""
+        for i, env in enumerate(self.envs):
+            obs, infos = env.reset()
+            for car in env.possible_agents:
+                self.last_obs[(i, car)] = obs[car]
+                self.last_info[(i, car)] = infos[car]
+        n = len(self.slots)
+        return StepBatch(self._stack_obs(), np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
+
+    def set_opponents(self, assignments: dict[int, tuple[str, bytes]]) -> None:
+        """Give race ``i`` an opponent ``(name, onnx_bytes)`` for its non-learner cars."""
+        from agents.selfplay import OnnxOpponent
+
+        for i, (name, graph) in assignments.items():
+            self.opponents[i] = (name, OnnxOpponent(graph, self.discrete))
+
+    def drain_simtrace(self) -> list[dict[str, Any]]:
+        """Simtrace rows recorded since the last call."""
+        rows, self.rows = self.rows, []
+        return rows
+
+    def step(self, actions: np.ndarray) -> StepBatch:
+        """Advance every race one control step with the slots' actions (slot order)."""
+        n = len(self.slots)
+        rewards, terminated, truncated = np.zeros(n), np.zeros(n, bool), np.zeros(n, bool)
+        episodes: list[dict[str, Any]] = []
+        slot_of = {(s.env, s.car): k for k, s in enumerate(self.slots)}
+        for i, env in enumerate(self.envs):
+            commands = {car: self._action(i, car, actions, slot_of) for car in env.agents}
+            try:
+                obs, rew, term, trunc, infos = env.step(commands)
+            except Exception as exc:  # the user's reward function, mostly
+                raise RuntimeError(f"race {i}: {type(exc).__name__}: {exc}") from exc
+            poses = env.car_poses()
+            for car in commands:
+                self.last_obs[(i, car)] = obs[car]
+                self.last_info[(i, car)] = infos[car]
+                k = slot_of.get((i, car))
+                if k is not None:
+                    slot = self.slots[k]
+                    slot.steps += 1
+                    slot.reward += rew[car]
+                    rewards[k], terminated[k], truncated[k] = rew[car], term[car], trunc[car]
+                    if self.record_simtrace:
+                        self._record(slot, commands[car], rew[car], infos[car], poses[car], env)
+                    if term[car] or trunc[car]:
+                        episodes.append(self._episode_stats(i, car, slot, infos[car]))
+                if term[car] or trunc[car]:
+                    first, info = env.restart_car(car)
+                    self.last_obs[(i, car)] = first
+                    self.last_info[(i, car)] = info
+        return StepBatch(self._stack_obs(), rewards, terminated, truncated, episodes)
+
+    def _action(
+        self, i: int, car: str, actions: np.ndarray, slot_of: dict[tuple[int, str], int]
+    ) -> Any:
+        k = slot_of.get((i, car))
+        if k is not None:
+            return int(actions[k]) if self.discrete else actions[k]
+        if i not in self.opponents:
+            raise RuntimeError(f"race {i}: car {car!r} has neither a learner slot nor an opponent")
+        return self.opponents[i][1].act(self.last_obs[(i, car)])
+
+    def _episode_stats(self, i: int, car: str, slot: _Slot, info: dict[str, Any]) -> dict:
+        lap_complete = info["episode_status"] == "lap_complete"
+        stats = {
+            "reward": slot.reward,
+            "steps": slot.steps,
+            "progress": 100.0 if lap_complete else float(info["progress"]),
+            "lap_complete": lap_complete,
+            "status": info["episode_status"],
+        }
+        if i in self.opponents:
+            rivals = [
+                self.last_info[(i, c)]["progress"]
+                for c in self.envs[i].possible_agents
+                if c not in self.learners
+            ]
+            stats["opponent"] = self.opponents[i][0]
+            stats["win"] = stats["lap_complete"] or stats["progress"] > max(rivals, default=0.0)
+        slot.episode += 1
+        slot.steps, slot.reward = 0, 0.0
+        return stats
+
+    def _record(
+        self,
+        slot: _Slot,
+        action: Any,
+        reward: float,
+        info: dict[str, Any],
+        pose: tuple[float, float, float, float],
+        env: RacingEnv,
+    ) -> None:
+        params = info["params"]
+        status = info["episode_status"]
+        self.rows.append(
+            {
+                "episode": slot.episode * len(self.slots) + slot.index,
+                "steps": slot.steps,
+                "X": pose[0],
+                "Y": pose[1],
+                "yaw": float(np.degrees(pose[2])),
+                "steer": params["steering_angle"],
+                "throttle": params["speed"],
+                "action": action if self.discrete else "[{:.4f}, {:.4f}]".format(*action),
+                "reward": reward,
+                "done": status not in ("in_progress", "prepare"),
+                "all_wheels_on_track": params["all_wheels_on_track"],
+                "progress": info["progress"],
+                "closest_waypoint": params["closest_waypoints"][1],
+                "track_len": env.track.length,
+                "tstamp": info["time"],
+                "episode_status": status,
+                "pause_duration": 0.0,
+                "obstacle_crash_counter": int(status == "crashed"),
+                "wall_clock": time.time(),
+            }
+        )
+
+    def _stack_obs(self) -> dict[str, np.ndarray]:
+        first = self.last_obs[(self.slots[0].env, self.slots[0].car)]
+        return {
+            name: np.stack([self.last_obs[(s.env, s.car)][name] for s in self.slots])
+            for name in first
+        }
+
+    def close(self) -> None:
+        """Close every race."""
+        for env in self.envs:
+            env.close()
+
+
+def _worker(conn: Any, kwargs: dict[str, Any]) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the trainer handles Ctrl-C
+    try:
+        group = EnvGroup(**kwargs)
+        conn.send(("ok", None))
+    except Exception:
+        conn.send(("error", traceback.format_exc(limit=3)))
+        return
+    while True:
+        command, args = conn.recv()
+        if command == "close":
+            group.close()
+            conn.send(("ok", None))
+            return
+        try:
+            conn.send(("ok", getattr(group, command)(*args)))
+        except Exception as exc:
+            conn.send(("error", f"{type(exc).__name__}: {exc}"))
+
+
+class RacingVecEnv(VecEnv):
+    """rsl-rl ``VecEnv`` over ``num_races`` copies of a training race.
+
+    Args:
+        config: the race (``mode="training"``); its cars' sensors and action space are the
+            learner's.
+        reward: path of a reward-function file or a bundled sample's name.
+        num_races: race instances (default: one per worker, at least one).
+        num_workers: worker processes (default ``os.cpu_count()``; 0 = in-process).
+        learner_cars: cars the shared policy drives (default: all); the others need
+            opponents (:meth:`set_opponents`).
+        record_simtrace: keep per-step simtrace rows (:meth:`drain_simtrace`).
+    """
+
+    def __init__(
+        self,
+        config: RaceConfig,
+        reward: str,
+        *,
+        num_races: int | None = None,
+        num_workers: int | None = None,
+        learner_cars: list[str] | None = None,
+        device: str = "cpu",
+        record_simtrace: bool = True,
+    ) -> None:
+        if config.mode != "training":
+            raise ValueError("RacingVecEnv needs a training-mode race config")
+        workers = (os.cpu_count() or 1) if num_workers is None else num_workers
+        self.num_races = num_races or max(1, workers)
+        self.learner_cars = learner_cars or [c.name for c in config.cars]
+        self.config = config
+        self.device = device
+        self.cfg = config.model_dump(mode="json")
+        space = config.cars[0].action_space
+        self.discrete = isinstance(space, DiscreteActionSpace)
+        self.num_actions = space.n if self.discrete else 2
+        self.num_envs = self.num_races * len(self.learner_cars)
+        self.max_episode_length = int(config.time_limit_s * config.physics.control_hz)
+        self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long)
+        self._episodes: list[dict[str, Any]] = []
+        seeds = [config.seed + 1000 * i for i in range(self.num_races)]
+        shares = min(workers, self.num_races) if workers > 0 else 1
+        self._races_of = [list(range(self.num_races))[w::shares] for w in range(shares)]
+        kwargs = [
+            {
+                "config_json": config.to_json(),
+                "reward": reward,
+                "seeds": [seeds[i] for i in races],
+                "learner_cars": self.learner_cars,
+                "record_simtrace": record_simtrace,
+            }
+            for races in self._races_of
+        ]
+        self._local: EnvGroup | None = None
+        self._conns: list[Any] = []
+        self._procs: list[Any] = []
+        if workers == 0:
+            self._local = EnvGroup(**kwargs[0])
+        else:
+            self._start_workers(kwargs)
+        self._obs = self._to_tensordict(self._call("reset"))
+
+    # ---------------------------------------------------------------- workers
+    def _start_workers(self, kwargs: list[dict[str, Any]]) -> None:
+        ctx = mp.get_context("spawn")
+        for kw in kwargs:
+            parent, child = ctx.Pipe()
+            proc = ctx.Process(target=_worker, args=(child, kw), daemon=True)
+            proc.start()
+            self._conns.append(parent)
+            self._procs.append(proc)
+        for conn in self._conns:
+            self._receive(conn)
+
+    @staticmethod
+    def _receive(conn: Any) -> Any:
+        try:
+            status, payload = conn.recv()
+        except EOFError:
+            raise RuntimeError("a racing worker exited unexpectedly") from None
+        if status == "error":
+            raise RuntimeError(f"racing worker failed: {payload}")
+        return payload
+
+    def _call(self, command: str, per_worker_args: list[tuple] | None = None) -> list[Any]:
+        """Run ``command`` on every group; returns the results in group order."""
+        groups = len(self._conns) or 1
+        args = per_worker_args or [()] * groups
+        if self._local is not None:
+            return [getattr(self._local, command)(*args[0])]
+        for conn, a in zip(self._conns, args, strict=True):
+            conn.send((command, a))
+        return [self._receive(conn) for conn in self._conns]
+
+    # ------------------------------------------------------------- rsl-rl API
+    def get_observations(self) -> TensorDict:
+        """The current observations (a fresh TensorDict of sensor groups)."""
+        return self._obs.clone()
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """Step every race with the slots' actions (one-hot rows or 2 continuous values)."""
+        acts = actions.detach().to("cpu")
+        if self.discrete:
+            values = acts.argmax(dim=-1).numpy()
+        else:
+            values = acts.clamp(-1.0, 1.0).numpy().astype(np.float32)
+        per_group, start = [], 0
+        for races in self._races_of:
+            count = len(races) * len(self.learner_cars)
+            per_group.append((values[start : start + count],))
+            start += count
+        batches = self._call("step", per_group)
+        self._obs = self._to_tensordict(batches)
+        rewards = torch.tensor(np.concatenate([b.rewards for b in batches]), dtype=torch.float32)
+        terminated = torch.tensor(np.concatenate([b.terminated for b in batches]))
+        truncated = torch.tensor(np.concatenate([b.truncated for b in batches]))
+        dones = terminated | truncated
+        self.episode_length_buf = torch.where(dones, 0, self.episode_length_buf + 1)
+        episodes = [e for b in batches for e in b.episodes]
+        self._episodes.extend(episodes)
+        extras: dict[str, Any] = {"time_outs": truncated.clone()}
+        if episodes:
+            extras["log"] = {
+                "/episode/reward": torch.tensor([e["reward"] for e in episodes]),
+                "/episode/progress": torch.tensor([e["progress"] for e in episodes]),
+                "/episode/lap_completion": torch.tensor(
+                    [float(e["lap_complete"]) for e in episodes]
+                ),
+            }
+        return self._obs.clone(), rewards, dones, extras
+
+    # ------------------------------------------------------------------ extras
+    def pop_episodes(self) -> list[dict[str, Any]]:
+        """Per-episode stats (reward, steps, progress, lap_complete, ...) since last call."""
+        episodes, self._episodes = self._episodes, []
+        return episodes
+
+    def drain_simtrace(self) -> list[dict[str, Any]]:
+        """Simtrace rows of every slot since the last call."""
+        return [row for rows in self._call("drain_simtrace") for row in rows]
+
+    def set_opponents(self, assignments: dict[int, tuple[str, bytes]]) -> None:
+        """Assign ``(name, onnx_bytes)`` opponents to races (global race index)."""
+        per_group = [
+            ({local: assignments[g] for local, g in enumerate(races) if g in assignments},)
+            for races in self._races_of
+        ]
+        self._call("set_opponents", per_group)
+
+    def close(self) -> None:
+        """Stop the workers and close every race."""
+        if self._local is not None:
+            self._local.close()
+            self._local = None
+        for conn in self._conns:
+            try:
+                conn.send(("close", ()))
+                conn.recv()
+            except (OSError, EOFError):
+                pass
+        for proc in self._procs:
+            proc.join(timeout=5)
+            if proc.is_alive():
+                proc.terminate()
+        self._conns, self._procs = [], []
+
+    def _to_tensordict(self, batches: list[StepBatch]) -> TensorDict:
+        arrays = {name: np.concatenate([b.obs[name] for b in batches]) for name in batches[0].obs}
+        return observation_groups(arrays, self.device)

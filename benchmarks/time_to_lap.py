@@ -1,0 +1,109 @@
+"""Time to a clean lap: train from scratch until an evaluation drives 3 laps, 0 off-tracks.
+
+Track ``beginner_loop``, follow-centre-line reward, 3 x 3 discrete actions at 1 m/s. For
+each sensor case (``lidar``, ``camera``) it reports the wall-clock minutes to the first
+evaluation (race mode, 3 laps, deterministic policy) with 3 laps and no off-track, the
+best evaluation lap, and two references: the track's physical-limit lap
+(``tracks.raceline``) and the pure-pursuit baseline driving the same action space.
+
+Run: ``.venv/bin/python benchmarks/time_to_lap.py --case lidar --max-minutes 15``
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+import arena
+from agents.action_spaces import parse_action_space_spec
+from agents.hyperparameters import Hyperparameters
+from agents.pursuit import PurePursuitPolicy
+from agents.train import Trainer, TrainSettings
+from arena.race import run_race
+from tracks.catalog import get_track
+from tracks.raceline import compute_racing_line
+
+TRACK = "beginner_loop"
+SPACE = "3x3@1.0"
+# Cheaper updates than DeepRacer's defaults (batch 64, 10 epochs) on a 2-core CPU.
+HYPERPARAMETERS = Hyperparameters(batch_size=64, num_epochs=2, discount_factor=0.99, lr=5e-4)
+
+
+def references() -> tuple[float, float | None]:
+    """Physical-limit lap time and the pure-pursuit baseline's best lap (3-lap race)."""
+    track = get_track(TRACK)
+    limit = compute_racing_line(track).lap_time
+    space = parse_action_space_spec(SPACE)
+    config = arena.make_config(track=TRACK, action_space=space, laps=3, seed=0)
+    result = run_race(config, {"car0": PurePursuitPolicy(track, space)})
+    return limit, result.car("car0").best_lap
+
+
+def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
+    """Train one sensor case until a clean 3-lap evaluation or the time cap."""
+    settings = TrainSettings(
+        track=TRACK,
+        sensors=(case,),
+        action_space=parse_action_space_spec(SPACE),
+        reward="follow_center_line",
+        minutes=max_minutes,
+        workers=workers,
+        races=max(1, workers),
+        steps_per_env=512 // max(1, workers),
+        eval_every=4,
+        eval_time_limit_s=240.0,  # 3 laps at the slowest speed (1/3 m/s) fit
+        stop_on_clean_eval=True,
+    )
+    started = time.monotonic()
+    result = Trainer(settings, out / case, HYPERPARAMETERS).run()
+    best = max(result.evaluations, key=lambda e: e["progress"], default=None)
+    clean = next((e for e in result.evaluations if e["elapsed_s"] == result.first_clean_eval_s), {})
+    return {
+        "clean_best_lap": clean.get("best_lap"),
+        "clean_total": clean.get("total_time"),
+        "case": case,
+        "minutes": result.first_clean_eval_s / 60.0 if result.first_clean_eval_s else None,
+        "wall_minutes": (time.monotonic() - started) / 60.0,
+        "iterations": result.iterations,
+        "best_lap": result.best_lap,
+        "best_eval_progress": best["progress"] if best else 0.0,
+    }
+
+
+def main() -> None:
+    """Parse arguments, run the cases, print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--case", choices=["lidar", "camera", "both"], default="both")
+    parser.add_argument("--max-minutes", type=float, default=15.0)
+    parser.add_argument("--workers", type=int, default=0)
+    parser.add_argument("--out", type=Path, default=Path("runs/time_to_lap"))
+    args = parser.parse_args()
+    cases = ["lidar", "camera"] if args.case == "both" else [args.case]
+    limit, pursuit = references()
+    rows = [train_case(c, args.max_minutes, args.out, args.workers) for c in cases]
+    table = Table(title=f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line)")
+    columns = ("policy", "minutes to clean 3 laps", "iterations", "clean run: best lap / total")
+    for column in (*columns, "best eval lap (s)"):
+        table.add_column(column)
+    table.add_column("best eval completion")
+    for r in rows:
+        reached = f"{r['minutes']:.1f}" if r["minutes"] else f"not in {args.max_minutes:g}"
+        lap = f"{r['best_lap']:.2f}" if r["best_lap"] else "-"
+        clean = "-"
+        if r["clean_best_lap"] is not None:
+            clean = f"{r['clean_best_lap']:.2f} / {r['clean_total']:.2f}"
+        row = (r["case"], reached, str(r["iterations"]), clean, lap)
+        table.add_row(*row, f"{r['best_eval_progress']:.0f}%")
+    table.add_row(
+        "pure pursuit (baseline)", "-", "-", "-", f"{pursuit:.2f}" if pursuit else "-", ""
+    )
+    table.add_row("physical limit (raceline)", "-", "-", "-", f"{limit:.2f}", "")
+    Console().print(table)
+
+
+if __name__ == "__main__":
+    main()

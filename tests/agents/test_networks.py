@@ -1,0 +1,99 @@
+"""Network presets, hyperparameter mapping and ONNX export."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+import torch
+
+from agents import networks
+from agents.export import example_inputs, export_onnx
+from agents.hyperparameters import Hyperparameters
+from agents.selfplay import pfsp_weights
+from arena.actions import ContinuousActionSpace, DiscreteActionSpace, default_discrete_space
+
+DISCRETE = default_discrete_space()
+CONTINUOUS = ContinuousActionSpace()
+
+CASES = [
+    ("3-layer CNN", ("camera",), DISCRETE),
+    ("5-layer CNN", ("stereo",), DISCRETE),
+    ("3-layer CNN", ("camera", "lidar"), CONTINUOUS),
+    ("dense 256-256", ("lidar",), DISCRETE),
+    ("dense 256-256", ("sector_lidar",), CONTINUOUS),
+    ("dense 256-256", ("discretized_sector_lidar",), DISCRETE),
+]
+
+
+@pytest.mark.parametrize(("preset", "sensors", "space"), CASES)
+def test_preset_forward(preset, sensors, space):
+    actor = networks.build_actor(preset, sensors, space)
+    obs = networks.example_observations(sensors, batch=3)
+    out = actor(obs, stochastic_output=True)
+    assert out.shape == (3, networks.num_actions(space))
+    if isinstance(space, DiscreteActionSpace):
+        assert torch.all(out.sum(dim=1) == 1)  # one-hot samples
+
+
+def test_three_layer_cnn_matches_deepracer_layers():
+    actor = networks.build_actor("3-layer CNN", ("camera",), DISCRETE)
+    convs = [m for m in actor.cnns["camera"] if isinstance(m, torch.nn.Conv2d)]
+    assert [(c.out_channels, c.kernel_size[0], c.stride[0]) for c in convs] == [
+        (32, 8, 4),
+        (64, 4, 2),
+        (64, 3, 1),
+    ]
+    linears = [m for m in actor.mlp if isinstance(m, torch.nn.Linear)]
+    assert linears[0].out_features == 512
+
+
+def test_preset_sensor_mismatch_is_refused():
+    with pytest.raises(ValueError, match="needs a camera"):
+        networks.check_preset("3-layer CNN", ("lidar",))
+    with pytest.raises(ValueError, match="cannot read a camera"):
+        networks.check_preset("dense 256-256", ("camera",))
+    with pytest.raises(ValueError, match="unknown network preset"):
+        networks.check_preset("7-layer CNN", ("camera",))
+
+
+def test_hyperparameters_map_to_rsl_rl(tmp_path):
+    hp = Hyperparameters(batch_size=128, num_epochs=4, lr=1e-4, beta_entropy=0.02)
+    actor, critic, groups = networks.model_configs("dense 256-256", ("lidar",), DISCRETE)
+    cfg = hp.to_rsl_rl(4, actor, critic, groups, num_steps_per_env=64)
+    alg = cfg["algorithm"]
+    assert alg["learning_rate"] == 1e-4
+    assert alg["num_learning_epochs"] == 4
+    assert alg["num_mini_batches"] == 2  # 4 x 64 samples / 128
+    assert alg["entropy_coef"] == 0.02
+    assert alg["gamma"] == 0.999 and alg["lam"] == 0.95 and alg["clip_param"] == 0.2
+    written = json.loads(hp.write(tmp_path).read_text())
+    assert written["batch_size"] == 128 and written["loss_type"] == "huber"
+    assert set(written) >= {"e_greedy_value", "epsilon_steps", "exploration_type", "stack_size"}
+
+
+@pytest.mark.parametrize(
+    ("preset", "sensors", "space"),
+    [CASES[0], CASES[2], CASES[3]],
+)
+def test_onnx_export_matches_torch(preset, sensors, space):
+    torch.manual_seed(0)
+    actor = networks.build_actor(preset, sensors, space).eval()
+    graph = export_onnx(actor, sensors, space)
+    session = ort.InferenceSession(graph, providers=["CPUExecutionProvider"])
+    raw = example_inputs(sensors, batch=5, seed=1)
+    (onnx_out,) = session.run(None, raw)
+    with torch.inference_mode():
+        torch_out = actor(networks.observation_groups(raw))
+    if isinstance(space, DiscreteActionSpace):
+        assert np.array_equal(onnx_out.argmax(axis=1), torch_out.numpy().argmax(axis=1))
+    else:
+        np.testing.assert_allclose(onnx_out, torch_out.clamp(-1, 1).numpy(), atol=1e-5)
+
+
+def test_pfsp_prefers_opponents_the_learner_loses_to():
+    weights = pfsp_weights([0.9, 0.5, 0.1])
+    assert weights.sum() == pytest.approx(1.0)
+    assert weights[2] > weights[1] > weights[0] > 0

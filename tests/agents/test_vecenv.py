@@ -1,0 +1,125 @@
+"""The rsl-rl VecEnv adapter: shapes, dones, auto-reset, workers and opponents."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from tensordict import TensorDict
+
+import arena
+from agents import networks
+from agents.export import export_onnx
+from agents.vecenv import RacingVecEnv
+from arena.actions import ContinuousActionSpace, default_discrete_space
+
+SPACE = default_discrete_space()
+
+
+def _config(**kw):
+    kw.setdefault("action_space", SPACE)
+    return arena.make_config(track="beginner_loop", mode="training", seed=3, **kw)
+
+
+def _one_hot(env: RacingVecEnv, index: int) -> torch.Tensor:
+    actions = torch.zeros(env.num_envs, env.num_actions)
+    actions[:, index] = 1.0
+    return actions
+
+
+def _drive(env: RacingVecEnv, steps: int, index: int) -> list[tuple]:
+    out = []
+    for _ in range(steps):
+        out.append(env.step(_one_hot(env, index)))
+    return out
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_shapes_dones_and_auto_reset(workers):
+    env = RacingVecEnv(
+        _config(sensors=("lidar",)), "follow_center_line", num_races=2, num_workers=workers
+    )
+    try:
+        assert env.num_envs == 2 and env.num_actions == SPACE.n
+        obs = env.get_observations()
+        assert isinstance(obs, TensorDict) and obs["lidar"].shape == (2, 64)
+        # hard left at the highest speed leaves the track within a few seconds
+        results = _drive(env, 90, index=1)
+        dones = torch.stack([r[2] for r in results])
+        assert dones.any(dim=0).all(), "every slot should end an episode"
+        obs, rewards, done, extras = results[-1]
+        assert rewards.shape == (2,) and done.shape == (2,)
+        assert extras["time_outs"].shape == (2,) and extras["time_outs"].dtype == torch.bool
+        logs = [r[3]["log"] for r in results if "log" in r[3]]
+        assert logs and set(logs[0]) == {
+            "/episode/reward",
+            "/episode/progress",
+            "/episode/lap_completion",
+        }
+        episodes = env.pop_episodes()
+        assert len(episodes) == int(dones.sum())
+        assert all(e["status"] == "off_track" for e in episodes)
+        rows = env.drain_simtrace()
+        assert len(rows) == 90 * 2 and {"episode", "X", "done", "tstamp"} <= set(rows[0])
+        assert (env.episode_length_buf < 90).all()  # restarted after their episodes ended
+    finally:
+        env.close()
+
+
+def test_camera_and_continuous_actions():
+    space = ContinuousActionSpace()
+    env = RacingVecEnv(
+        _config(sensors=("camera", "lidar"), action_space=space),
+        "follow_center_line",
+        num_races=1,
+        num_workers=0,
+    )
+    try:
+        obs = env.get_observations()
+        assert obs["camera"].shape == (1, 1, 120, 160) and obs["camera"].dtype == torch.float32
+        assert float(obs["camera"].min()) >= 0.0 and float(obs["camera"].max()) <= 1.0
+        with torch.inference_mode():  # as in rsl-rl's rollout
+            obs, *_ = env.step(torch.tensor([[5.0, -5.0]]))  # clipped to [-1, 1]
+        assert obs["lidar"].shape == (1, 64)
+    finally:
+        env.close()
+
+
+def test_reward_errors_surface_from_workers(tmp_path):
+    bad = tmp_path / "reward.py"
+    bad.write_text("def reward_function(params):\n    return 1.0 / (params['steps'] - 1)\n")
+    env = RacingVecEnv(_config(sensors=("lidar",)), str(bad), num_races=1, num_workers=0)
+    try:
+        with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+            env.step(_one_hot(env, 4))
+    finally:
+        env.close()
+
+
+def test_head_to_model_with_frozen_opponent():
+    config = _config(race_type="head_to_model", num_cars=2, sensors=("lidar",))
+    env = RacingVecEnv(
+        config, "follow_center_line", num_races=2, num_workers=0, learner_cars=["car0"]
+    )
+    try:
+        assert env.num_envs == 2  # one learner slot per race; car1 is an opponent
+        actor = networks.build_actor("dense 256-256", ("lidar",), SPACE)
+        graph = export_onnx(actor, ("lidar",), SPACE)
+        env.set_opponents({0: ("snapshot:0", graph), 1: ("snapshot:0", graph)})
+        _drive(env, 60, index=1)
+        episodes = env.pop_episodes()
+        assert episodes and all(e["opponent"] == "snapshot:0" for e in episodes)
+        assert all(isinstance(e["win"], bool) for e in episodes)
+    finally:
+        env.close()
+
+
+def test_shared_self_play_makes_every_car_a_slot():
+    config = _config(race_type="head_to_model", num_cars=2, sensors=("lidar",))
+    env = RacingVecEnv(config, "follow_center_line", num_races=1, num_workers=0)
+    try:
+        assert env.num_envs == 2
+        obs, rewards, dones, _ = env.step(_one_hot(env, 4))
+        assert dones.shape == (2,)
+        assert rewards.shape == (2,) and obs["lidar"].shape == (2, 64)
+    finally:
+        env.close()
