@@ -152,10 +152,13 @@ def record_race(
     result: RaceResult,
     entries: Mapping[str, Entry],
     job: Job | None = None,
+    *,
+    commit: bool = True,
 ) -> Race:
     """Store a finished race: config, per-car results (ms), trace file; mark ``job`` done.
 
-    ``entries`` maps car names to the entries that drove them (bots have none).
+    ``entries`` maps car names to the entries that drove them (bots have none). With
+    ``commit=False`` the rows join the caller's transaction (workers commit once).
     """
     trace = json.dumps(
         {"trace": result.trace, "bots": result.bots, "obstacles": result.obstacles},
@@ -204,12 +207,16 @@ def record_race(
     session.execute(
         update(Event).where(Event.id == event.id).values(results_version=Event.results_version + 1)
     )
-    session.commit()
+    if commit:
+        session.commit()
     return race
 
 
-def rate_race(session: Session, race: Race) -> None:
-    """Update the head-to-head ratings of the models in ``race`` (Plackett-Luce)."""
+def rate_race(session: Session, race: Race, *, commit: bool = True) -> None:
+    """Update the head-to-head ratings of the models in ``race`` (Plackett-Luce).
+
+    With ``commit=False`` the update joins the caller's transaction.
+    """
     cars = [c for c in race.cars if c.model_id is not None]
     if len(cars) < 2:
         return
@@ -238,7 +245,8 @@ def rate_race(session: Session, race: Race) -> None:
         .where(Event.id == race.event_id)
         .values(results_version=Event.results_version + 1)
     )
-    session.commit()
+    if commit:
+        session.commit()
 
 
 def leaderboard(session: Session, event: Event) -> list[ranking.Standing]:

@@ -200,6 +200,44 @@ def standings(
     except LeagueError as exc:
         console.print(f"[red]{exc.message}[/red]")
         raise typer.Exit(1) from None
+    console.print(standings_table(info, board))
+
+
+@app.command()
+def scheduler(data_dir: DataDir = None) -> None:
+    """Run the scheduler daemon: jobs for entries, head-to-model rounds, event closing."""
+    import logging
+
+    from league.db import make_engine
+    from league.migrations import upgrade
+    from league.scheduler import Scheduler
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    settings = _settings(data_dir)
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    upgrade(make_engine(settings.db_url, settings.sqlite_busy_timeout_ms))
+    Scheduler(settings).run_forever()
+
+
+@app.command()
+def worker(
+    concurrency: Annotated[int, typer.Option(min=1, help="Worker processes (one race each).")] = 1,
+    data_dir: DataDir = None,
+) -> None:
+    """Run evaluation workers: lease jobs, race them sandboxed, record results."""
+    import logging
+    import os
+
+    from league.worker import supervise
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    if data_dir is not None:
+        os.environ["SLIPSTREAM_DATA_DIR"] = str(data_dir)
+    supervise(concurrency)
+
+
+def standings_table(info: dict, board: dict) -> Table:
+    """An event's leaderboard (as the API returns it) as a Rich table."""
     rated = board["race_type"] == "head_to_model"
     table = Table(title=f"{info['name']} ({info['race_type']}, {board['ranking_metric']} time)")
     columns = ["rank", "alias", "laps", "best s", "average s", "total s", "off-track"]
@@ -225,4 +263,4 @@ def standings(
             cells += [f"{row[k]:.2f}" if row[k] is not None else "-" for k in ("mu", "sigma")]
             cells.append(f"{row['ordinal']:.2f}" if row["ordinal"] is not None else "-")
         table.add_row(*cells)
-    console.print(table)
+    return table

@@ -104,7 +104,9 @@ class Model(Base):
 
 
 class Event(Base):
-    """One leaderboard: a ruleset frozen at creation, a time window and evaluation seeds."""
+    """One leaderboard: a ruleset frozen at creation, a time window and evaluation seeds.
+
+    ``final_standings`` is the snapshot the scheduler writes once the event has closed."""
 
     __tablename__ = "events"
     __table_args__ = (
@@ -127,6 +129,8 @@ class Event(Base):
     round_interval_s: Mapped[int | None] = mapped_column(Integer, nullable=True)
     next_round_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
     results_version: Mapped[int] = mapped_column(Integer, default=0)
+    final_standings: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON, nullable=True)
+    finalized_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
     created_by: Mapped[int | None] = mapped_column(
         ForeignKey("racers.id", ondelete="SET NULL"), nullable=True
     )
@@ -160,7 +164,8 @@ class Job(Base):
     """A unit of work for an evaluation worker, leased so that a dead worker's job returns.
 
     Evaluation jobs carry an entry and a seed, unique per (entry, seed); head-to-head round
-    jobs (``entry_id`` null) carry a round number, unique per (event, round, seed).
+    jobs (``entry_id`` null) carry a round number, unique per (event, round, seed), and a
+    ``lineup``: the grid as ``[{"entry_id": 3}, {"bot": "pursuit"}, ...]``.
     """
 
     __tablename__ = "jobs"
@@ -180,6 +185,7 @@ class Job(Base):
     )
     round: Mapped[int | None] = mapped_column(Integer, nullable=True)
     seed: Mapped[int] = mapped_column(BigInteger)
+    lineup: Mapped[list[dict[str, Any]] | None] = mapped_column(JSON, nullable=True)
     status: Mapped[str] = mapped_column(String(16), default="queued")
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     max_attempts: Mapped[int] = mapped_column(Integer, default=3)

@@ -25,6 +25,17 @@ class Settings(BaseSettings):
     )
     rate_limit_burst: int = Field(default=200, gt=0, description="Requests a client may burst.")
     sqlite_busy_timeout_ms: int = Field(default=5000, ge=0)
+    lease_seconds: float = Field(default=30.0, gt=0.0, description="Job lease length.")
+    poll_seconds: float = Field(
+        default=1.0, gt=0.0, description="Idle wait of workers and the scheduler."
+    )
+    race_memory_mb: int = Field(default=1024, gt=0, description="Race child address space.")
+    race_cpu_seconds: int = Field(default=600, gt=0, description="Race child CPU time.")
+    race_wall_seconds: float = Field(default=900.0, gt=0.0, description="Race wall time.")
+    round_races_per_model: int = Field(
+        default=2, ge=1, description="Head-to-model races per model per round (k)."
+    )
+    round_max_cars: int = Field(default=4, ge=2, le=6, description="Cars per head-to-model race.")
 
     @property
     def db_url(self) -> str:

@@ -1,0 +1,130 @@
+"""What a job races: the config from the event's frozen ruleset, its cars and its seed.
+
+A :class:`RacePlan` is plain JSON-ready data (the config, and per car either a model file's
+bytes or a bot name), built in the worker from the database; :func:`policies` turns it into
+drivers inside the sandboxed child, loading submitted models only through
+``submissions.load_policy``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy.orm import Session
+
+from arena.config import CarConfig, RaceConfig
+from arena.policy import Policy
+from league.models import Entry, Event, Job, Model
+from league.storage import Storage
+
+BOTS = ("pursuit",)
+
+
+class NonFiniteOutput(ValueError):
+    """A submitted model produced NaN or inf during a race: its job fails."""
+
+
+class FiniteOutputs:
+    """Wraps an onnxruntime session; raises :class:`NonFiniteOutput` on NaN / inf outputs.
+
+    The validator refuses models that output NaN on random inputs, but a graph can still
+    do it on the observations of a real race. Such a race stops with a clear error rather
+    than letting the car drive on sanitised garbage.
+    """
+
+    def __init__(self, session: Any, car: str) -> None:
+        self.session = session
+        self.car = car
+        self.calls = 0
+
+    def run(self, *args: Any, **kwargs: Any) -> list:
+        """``session.run`` with the outputs checked."""
+        import numpy as np
+
+        outputs = self.session.run(*args, **kwargs)
+        self.calls += 1
+        if not all(np.all(np.isfinite(o)) for o in outputs):
+            raise NonFiniteOutput(
+                f"car {self.car}: the model output NaN or inf at step {self.calls}"
+            )
+        return outputs
+
+
+@dataclass(frozen=True)
+class CarPlan:
+    """One car of a planned race: a submitted model (``model`` bytes) or a built-in bot."""
+
+    name: str
+    entry_id: int | None
+    model: bytes | None = None
+    bot: str | None = None
+
+
+@dataclass(frozen=True)
+class RacePlan:
+    """Everything needed to run one job's race, and nothing from the database."""
+
+    config: RaceConfig
+    cars: tuple[CarPlan, ...]
+
+
+def car_name(slot: dict[str, Any], index: int) -> str:
+    """The car name of a lineup slot: ``entry<ID>`` for models, ``bot<N>`` for bots."""
+    return f"entry{slot['entry_id']}" if "entry_id" in slot else f"bot{index}"
+
+
+def model_car(name: str, info: dict[str, Any]) -> CarConfig:
+    """A car with the sensors, action space and lidar config a model declares."""
+    fields: dict[str, Any] = {"name": name, "sensors": tuple(info["sensors"])}
+    fields["action_space"] = info["action_space"]
+    if info.get("lidar_config"):
+        fields["lidar_config"] = info["lidar_config"]
+    return CarConfig.model_validate(fields)
+
+
+def lineup(job: Job) -> list[dict[str, Any]]:
+    """The job's grid: its one entry (evaluations) or the stored round lineup."""
+    if job.kind == "evaluation":
+        return [{"entry_id": job.entry_id}]
+    return list(job.lineup or [])
+
+
+def build_plan(session: Session, storage: Storage, job: Job) -> RacePlan:
+    """The race for ``job``: event ruleset + cars (models' declared sensors) + job seed."""
+    event = session.get_one(Event, job.event_id)
+    cars, plans = [], []
+    for index, slot in enumerate(lineup(job)):
+        name = car_name(slot, index)
+        if "entry_id" in slot:
+            entry = session.get_one(Entry, slot["entry_id"])
+            model = session.get_one(Model, entry.model_id)
+            cars.append(model_car(name, model.info))
+            plans.append(CarPlan(name, entry.id, model=storage.read("models", model.sha256)))
+        else:
+            if slot.get("bot") not in BOTS:
+                raise ValueError(f"unknown bot {slot.get('bot')!r} in job {job.id}")
+            cars.append(CarConfig(name=name))
+            plans.append(CarPlan(name, None, bot=slot["bot"]))
+    config = RaceConfig.build(**event.ruleset, cars=cars, seed=job.seed)
+    return RacePlan(config, tuple(plans))
+
+
+def policies(plan: RacePlan) -> dict[str, Policy]:
+    """Drivers for a plan (call in the sandbox: this runs submitted graphs)."""
+    from agents.pursuit import PurePursuitPolicy
+    from submissions import load_policy
+    from tracks.catalog import get_track
+
+    drivers: dict[str, Policy] = {}
+    track = None
+    for car, spec in zip(plan.cars, plan.config.cars, strict=True):
+        if car.model is not None:
+            policy = load_policy(car.model)
+            policy.session = FiniteOutputs(policy.session, car.name)
+            drivers[car.name] = policy
+        else:
+            if track is None:
+                track = get_track(plan.config.track).with_direction(plan.config.direction)
+            drivers[car.name] = PurePursuitPolicy(track, spec.action_space)
+    return drivers

@@ -1,0 +1,175 @@
+"""The job queue in the database: leasing, heartbeats, completion guards and lease expiry.
+
+A lease is a conditional update: a job moves from ``queued`` to ``running`` only if it is
+still queued, so two workers can never both win it. On PostgreSQL the candidate row is also
+picked with ``SELECT ... FOR UPDATE SKIP LOCKED``, so workers do not queue up behind each
+other's locks; SQLite serialises writers, and the conditional update inside the
+transaction is enough there. Every lease gets a fresh owner token, so a worker whose lease
+expired (and whose job another worker took) can never heartbeat, finish or fail it.
+"""
+
+from __future__ import annotations
+
+import random
+import uuid
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+
+from sqlalchemy import ColumnElement, and_, select, update
+from sqlalchemy.exc import InterfaceError, OperationalError
+from sqlalchemy.orm import Session
+
+from league.models import Job, utcnow
+
+DB_ERRORS = (OperationalError, InterfaceError)
+"""What an unreachable or locked database raises: wait and try again."""
+
+
+@dataclass(frozen=True)
+class Lease:
+    """A job held by one worker until ``expires_at`` (unless heartbeats extend it)."""
+
+    job_id: int
+    owner: str
+    attempt: int
+    expires_at: datetime
+
+
+class Backoff:
+    """Exponential backoff with jitter: 0.5 s doubling up to ``cap`` seconds."""
+
+    def __init__(self, cap: float = 10.0) -> None:
+        self.cap = cap
+        self.delay = 0.0
+
+    def next(self) -> float:
+        """The next wait, in seconds."""
+        self.delay = min(self.cap, max(0.5, self.delay * 2))
+        return self.delay * random.uniform(0.75, 1.25)
+
+    def reset(self) -> None:
+        """Back to the shortest wait after a success."""
+        self.delay = 0.0
+
+
+def _owned(lease: Lease) -> ColumnElement[bool]:
+    return and_(Job.id == lease.job_id, Job.lease_owner == lease.owner, Job.status == "running")
+
+
+def lease_job(
+    session: Session, worker: str, lease_s: float, now: datetime | None = None
+) -> Lease | None:
+    """Lease the oldest queued job for ``worker``; commit and return the lease, or None."""
+    now = now or utcnow()
+    query = select(Job.id).where(Job.status == "queued").order_by(Job.id).limit(8)
+    if session.get_bind().dialect.name == "postgresql":
+        query = query.limit(1).with_for_update(skip_locked=True)
+    for job_id in session.scalars(query).all():
+        owner = f"{worker}#{uuid.uuid4().hex[:12]}"
+        expires = now + timedelta(seconds=lease_s)
+        won = session.execute(
+            update(Job)
+            .where(Job.id == job_id, Job.status == "queued")
+            .values(
+                status="running",
+                lease_owner=owner,
+                lease_expires_at=expires,
+                attempts=Job.attempts + 1,
+                updated_at=now,
+            )
+            .returning(Job.attempts)
+        ).scalar_one_or_none()
+        if won is not None:
+            session.commit()
+            return Lease(job_id, owner, won, expires)
+    session.rollback()
+    return None
+
+
+def heartbeat(session: Session, lease: Lease, lease_s: float) -> Lease | None:
+    """Extend a held lease; None when the job is no longer ours (it expired and moved on)."""
+    expires = utcnow() + timedelta(seconds=lease_s)
+    done = session.execute(
+        update(Job).where(_owned(lease)).values(lease_expires_at=expires, updated_at=utcnow())
+    )
+    session.commit()
+    if done.rowcount != 1:
+        return None
+    return Lease(lease.job_id, lease.owner, lease.attempt, expires)
+
+
+def claim_done(session: Session, lease: Lease) -> bool:
+    """Inside the caller's transaction, mark the leased job done if it is still ours.
+
+    The first statement of the result transaction: on SQLite it takes the write lock, on
+    PostgreSQL it locks the job row, so the result rows that follow are written at most once.
+    """
+    done = session.execute(
+        update(Job)
+        .where(_owned(lease))
+        .values(status="done", lease_owner=None, lease_expires_at=None, error=None)
+    )
+    return done.rowcount == 1
+
+
+def fail_job(session: Session, lease: Lease, error: str, retry: bool) -> bool:
+    """Record ``error``; requeue when ``retry`` and attempts remain, else fail. Commits."""
+    job = session.execute(select(Job).where(_owned(lease))).scalar_one_or_none()
+    if job is None:
+        session.rollback()
+        return False
+    again = retry and job.attempts < job.max_attempts
+    job.status = "queued" if again else "failed"
+    job.error = error[:4000]
+    job.lease_owner = None
+    job.lease_expires_at = None
+    session.commit()
+    return True
+
+
+def release(session: Session, lease: Lease) -> None:
+    """Give a job back untouched (worker shutdown): queued again, this attempt not counted."""
+    session.execute(
+        update(Job)
+        .where(_owned(lease))
+        .values(
+            status="queued",
+            lease_owner=None,
+            lease_expires_at=None,
+            attempts=Job.attempts - 1,
+        )
+    )
+    session.commit()
+
+
+def expire_leases(session: Session, now: datetime | None = None) -> tuple[int, int]:
+    """Requeue running jobs whose lease ran out, or fail them when out of attempts.
+
+    The last error is kept: a failed job's ``error`` says how many attempts were made and
+    what went wrong last. Returns ``(requeued, failed)``. Commits.
+    """
+    now = now or utcnow()
+    expired = and_(Job.status == "running", Job.lease_expires_at < now)
+    stale = session.execute(
+        select(Job.id, Job.lease_owner, Job.attempts, Job.max_attempts, Job.error).where(expired)
+    ).all()
+    requeued = failed = 0
+    for job_id, owner, attempts, max_attempts, error in stale:
+        note = f"lease of {owner} expired (worker stopped heartbeating)"
+        out = attempts >= max_attempts
+        values = {
+            "status": "failed" if out else "queued",
+            "lease_owner": None,
+            "lease_expires_at": None,
+            "error": (
+                f"gave up after {attempts} attempts; last error: {error or note}" if out else note
+            ),
+        }
+        moved = session.execute(
+            update(Job).where(Job.id == job_id, Job.lease_owner == owner, expired).values(values)
+        )
+        if moved.rowcount == 1:
+            failed += out
+            requeued += not out
+    session.commit()
+    return requeued, failed

@@ -1,0 +1,254 @@
+"""The scheduler daemon: turns entries into jobs, runs head-to-model rounds, closes events.
+
+Each tick it (1) queues the missing evaluation jobs of time-trial, object-avoidance and
+head-to-bot entries (one per event seed), (2) starts due head-to-model rounds, (3) returns
+jobs with expired leases to the queue (or fails them), (4) writes the final standings of
+closed events. Every write is safe with several schedulers running: job inserts rely on the
+unique constraints (``ON CONFLICT DO NOTHING``), a round is claimed by advancing the event's
+``next_round_at`` with a conditional update, and a snapshot is written only where none is.
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+import signal
+import time
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import func, select, update
+from sqlalchemy.dialects import postgresql, sqlite
+from sqlalchemy.orm import Session
+
+from league import crud
+from league.db import make_engine, make_session_factory
+from league.matchmaking import Candidate, plan_round
+from league.models import Entry, Event, Job, Rating, utcnow
+from league.queue import DB_ERRORS, Backoff, expire_leases
+from league.ranking import Standing, initial_skill
+from league.settings import Settings
+
+log = logging.getLogger("slipstream.scheduler")
+ROUND_SEED_STRIDE = 1000
+
+
+def insert_jobs(session: Session, rows: list[dict[str, Any]]) -> int:
+    """Insert job rows, skipping any that already exist (unique keys); how many were new."""
+    if not rows:
+        return 0
+    dialect = postgresql if session.get_bind().dialect.name == "postgresql" else sqlite
+    statement = dialect.insert(Job).values(rows).on_conflict_do_nothing().returning(Job.id)
+    return len(session.execute(statement).all())
+
+
+def queue_evaluations(session: Session) -> int:
+    """Jobs for entries of evaluation events that have none yet (one per event seed)."""
+    pending = session.execute(
+        select(Entry.id, Entry.event_id, Event.seeds)
+        .join(Event, Entry.event_id == Event.id)
+        .outerjoin(Job, Job.entry_id == Entry.id)
+        .where(Event.race_type != "head_to_model", Job.id.is_(None))
+    ).all()
+    rows = [
+        {"kind": "evaluation", "event_id": event_id, "entry_id": entry_id, "seed": seed}
+        for entry_id, event_id, seeds in pending
+        for seed in seeds
+    ]
+    added = insert_jobs(session, rows)
+    session.commit()
+    return added
+
+
+def _candidates(session: Session, event: Event) -> list[Candidate]:
+    start = initial_skill()
+    rows = session.execute(
+        select(Entry.id, Rating.mu, Rating.sigma)
+        .outerjoin(Rating, (Rating.model_id == Entry.model_id) & (Rating.event_id == event.id))
+        .where(Entry.event_id == event.id)
+        .order_by(Entry.id)
+    ).all()
+    return [
+        Candidate(i, start.mu if mu is None else mu, start.sigma if sigma is None else sigma)
+        for i, mu, sigma in rows
+    ]
+
+
+def _round_busy(session: Session, event_id: int) -> bool:
+    return (
+        session.scalar(
+            select(Job.id)
+            .where(Job.event_id == event_id, Job.kind == "round")
+            .where(Job.status.in_(("queued", "running")))
+            .limit(1)
+        )
+        is not None
+    )
+
+
+def start_round(session: Session, event: Event, now: datetime, settings: Settings) -> int:
+    """Claim the event's due round and queue its races; the number of jobs queued."""
+    due = event.next_round_at
+    assert due is not None and event.round_interval_s
+    following = due
+    while following <= now:
+        following += timedelta(seconds=event.round_interval_s)
+    claimed = session.execute(
+        update(Event)
+        .where(Event.id == event.id, Event.next_round_at == due)
+        .values(next_round_at=following)
+    )
+    if claimed.rowcount != 1:  # another scheduler took this round
+        session.rollback()
+        return 0
+    if _round_busy(session, event.id):  # workers are behind: skip, do not pile rounds up
+        session.commit()
+        log.info("event %d: previous round still running; round skipped", event.id)
+        return 0
+    number = (session.scalar(select(func.max(Job.round)).where(Job.event_id == event.id)) or 0) + 1
+    rng = random.Random(f"{event.id}:{number}")
+    grids = plan_round(
+        _candidates(session, event), settings.round_races_per_model, settings.round_max_cars, rng
+    )
+    rows = [
+        {
+            "kind": "round",
+            "event_id": event.id,
+            "round": number,
+            "seed": number * ROUND_SEED_STRIDE + i,
+            "lineup": grid,
+        }
+        for i, grid in enumerate(grids)
+    ]
+    added = insert_jobs(session, rows)
+    session.commit()
+    log.info("event %d: round %d with %d races", event.id, number, added)
+    return added
+
+
+def due_rounds(session: Session, now: datetime, settings: Settings) -> int:
+    """Start every head-to-model round that is due; jobs queued."""
+    events = session.scalars(
+        select(Event).where(
+            Event.race_type == "head_to_model",
+            Event.next_round_at.is_not(None),
+            Event.next_round_at <= now,
+        )
+    ).all()
+    session.commit()
+    return sum(start_round(session, e, now, settings) for e in events if e.is_open(now))
+
+
+def standing_row(standing: Standing) -> dict[str, Any]:
+    """A leaderboard row as plain JSON for the final snapshot."""
+    r, skill = standing.result, standing.skill
+    return {
+        "rank": standing.rank,
+        "racer_id": r.racer_id,
+        "alias": r.alias,
+        "model_id": r.model_id,
+        "model_name": r.model_name,
+        "race_id": r.race_id,
+        "status": r.status,
+        "lap_count": r.laps,
+        "best_lap_ms": r.best_ms,
+        "average_lap_ms": r.average_ms,
+        "total_time_ms": r.total_ms,
+        "off_track_count": r.off_track_count,
+        "collision_count": r.crash_count,
+        "reset_count": r.reset_count,
+        "ranking_score_ms": standing.score_ms,
+        "submission_count": standing.submissions,
+        "mu": skill.mu if skill else None,
+        "sigma": skill.sigma if skill else None,
+        "ordinal": skill.ordinal if skill else None,
+    }
+
+
+def close_events(session: Session, now: datetime) -> int:
+    """Snapshot the standings of closed events whose jobs have all settled; how many."""
+    events = session.scalars(
+        select(Event).where(
+            Event.closes_at.is_not(None), Event.closes_at <= now, Event.finalized_at.is_(None)
+        )
+    ).all()
+    closed = 0
+    for event in events:
+        busy = session.scalar(
+            select(Job.id)
+            .where(Job.event_id == event.id, Job.status.in_(("queued", "running")))
+            .limit(1)
+        )
+        if busy is not None:
+            continue
+        rows = [standing_row(s) for s in crud.leaderboard(session, event)]
+        done = session.execute(
+            update(Event)
+            .where(Event.id == event.id, Event.finalized_at.is_(None))
+            .values(final_standings=rows, finalized_at=now)
+        )
+        session.commit()
+        if done.rowcount == 1:
+            closed += 1
+            log.info("event %d closed; final standings of %d racers written", event.id, len(rows))
+    return closed
+
+
+class Scheduler:
+    """The daemon: one :meth:`tick` every ``poll_seconds`` until SIGTERM / SIGINT."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self.engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
+        self.sessions = make_session_factory(self.engine)
+        self.stopping = False
+
+    def stop(self, *_args: object) -> None:
+        """Leave the loop after the current tick (signal handler)."""
+        self.stopping = True
+
+    def tick(self, now: datetime | None = None) -> dict[str, int]:
+        """One pass over the four duties; counts of what it did."""
+        now = now or utcnow()
+        with self.sessions() as session:
+            jobs = queue_evaluations(session)
+            rounds = due_rounds(session, now, self.settings)
+            requeued, failed = expire_leases(session, now)
+            closed = close_events(session, now)
+        done = {"evaluation_jobs": jobs, "round_jobs": rounds, "requeued": requeued}
+        done |= {"failed": failed, "closed": closed}
+        if any(done.values()):
+            log.info("tick: %s", ", ".join(f"{k} {v}" for k, v in done.items() if v))
+        return done
+
+    def run_forever(self) -> None:
+        """Tick until stopped; back off while the database is unreachable."""
+        signal.signal(signal.SIGTERM, self.stop)
+        signal.signal(signal.SIGINT, self.stop)
+        backoff = Backoff()
+        log.info("scheduler started")
+        while not self.stopping:
+            try:
+                self.tick()
+                backoff.reset()
+                wait = self.settings.poll_seconds
+            except DB_ERRORS as exc:
+                wait = backoff.next()
+                log.warning(
+                    "database unavailable (%s); retrying in %.1f s", type(exc).__name__, wait
+                )
+            end = time.monotonic() + wait
+            while not self.stopping and time.monotonic() < end:
+                time.sleep(min(0.2, end - time.monotonic()))
+        self.engine.dispose()
+        log.info("scheduler stopped")
+
+
+def main() -> None:
+    """``python -m league.scheduler``: the daemon with settings from the environment."""
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    Scheduler(Settings()).run_forever()
+
+
+if __name__ == "__main__":
+    main()

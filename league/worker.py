@@ -1,0 +1,241 @@
+"""Evaluation workers: lease a job, race it in the sandbox, record the result exactly once.
+
+One worker process runs one race at a time and is single-threaded (it forks the race
+child, so it must be). ``slipstream league worker --concurrency N`` runs a small supervisor
+that starts N such processes (``python -m league.worker``) with one BLAS/OpenMP thread each
+and restarts any that die. While a race runs the worker heartbeats its lease; the result,
+its per-car rows, the trace and the rating update are written in one transaction that
+begins by marking the job done *if this lease still holds it*, so a worker whose lease
+expired can never record a second result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from sqlalchemy import select
+
+from arena.race import RaceResult, run_race
+from league import crud
+from league.db import make_engine, make_session_factory
+from league.evaluation import RacePlan, build_plan, policies
+from league.models import Entry, Event, Job
+from league.queue import (
+    DB_ERRORS,
+    Backoff,
+    Lease,
+    claim_done,
+    expire_leases,
+    fail_job,
+    heartbeat,
+    lease_job,
+)
+from league.sandbox import Limits, SandboxError, run_limited
+from league.settings import Settings
+from league.storage import Storage
+
+log = logging.getLogger("slipstream.worker")
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+class LeaseLost(RuntimeError):
+    """The job's lease expired and someone else may hold it: drop this race."""
+
+
+def race_answer(plan: RacePlan) -> dict[str, Any]:
+    """Run the planned race (in the sandboxed child) and return it as JSON-ready data."""
+    return run_race(plan.config, policies(plan), record_trace=True).to_dict()
+
+
+class Worker:
+    """One evaluation worker bound to a database and a file store."""
+
+    def __init__(self, settings: Settings, name: str | None = None) -> None:
+        self.settings = settings
+        self.name = name or f"{socket.gethostname()}-{os.getpid()}"
+        self.engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
+        self.sessions = make_session_factory(self.engine)
+        self.storage = Storage(settings.storage_dir)
+        self.limits = Limits(
+            memory_mb=settings.race_memory_mb,
+            cpu_seconds=settings.race_cpu_seconds,
+            wall_seconds=settings.race_wall_seconds,
+        )
+        self.stopping = False
+        self.backoff = Backoff()
+
+    def stop(self, *_args: object) -> None:
+        """Finish the current race, then leave the loop (signal handler)."""
+        self.stopping = True
+
+    def run_forever(self) -> None:
+        """Work until stopped; back off while the database is unreachable."""
+        signal.signal(signal.SIGTERM, self.stop)
+        signal.signal(signal.SIGINT, self.stop)
+        log.info("worker %s started", self.name)
+        while not self.stopping:
+            try:
+                busy = self.run_once()
+                self.backoff.reset()
+            except DB_ERRORS as exc:
+                self._wait_db(exc)
+                continue
+            if not busy:
+                self._sleep(self.settings.poll_seconds)
+        self.engine.dispose()
+        log.info("worker %s stopped", self.name)
+
+    def run_once(self) -> bool:
+        """Expire stale leases, lease one job and process it; False when the queue is empty."""
+        with self.sessions() as session:
+            requeued, failed = expire_leases(session)
+            if requeued or failed:
+                log.info("expired leases: %d requeued, %d failed", requeued, failed)
+            lease = lease_job(session, self.name, self.settings.lease_seconds)
+        if lease is None:
+            return False
+        log.info("job %d leased (attempt %d)", lease.job_id, lease.attempt)
+        self.process(lease)
+        return True
+
+    def process(self, lease: Lease) -> None:
+        """Race a leased job and record its result, or fail it with a clear error."""
+        try:
+            with self.sessions() as session:
+                plan = build_plan(session, self.storage, session.get_one(Job, lease.job_id))
+        except DB_ERRORS:
+            raise
+        except Exception as exc:  # a bad stored model or ruleset: the job cannot run
+            self._fail(lease, f"could not build the race: {exc}")
+            return
+        holder = [lease]
+        try:
+            data = run_limited(lambda: race_answer(plan), self.limits, self._ticker(holder))
+        except LeaseLost:
+            log.warning("job %d: lease lost mid-race; result dropped", lease.job_id)
+            return
+        except SandboxError as exc:
+            self._fail(holder[0], f"{exc.kind}: {exc}")
+            return
+        try:
+            result = RaceResult.from_dict(data)
+        except (KeyError, TypeError, ValueError) as exc:
+            self._fail(holder[0], f"error: the race answer was malformed ({exc})")
+            return
+        if self._retry_db(lambda s: self.record(s, holder[0], plan, result)):
+            log.info("job %d done", lease.job_id)
+        else:
+            log.warning("job %d: lease lost before recording; result dropped", lease.job_id)
+
+    def record(self, session: Any, lease: Lease, plan: RacePlan, result: RaceResult) -> bool:
+        """Store the race, its cars, trace and ratings in one transaction, once per job."""
+        if not claim_done(session, lease):
+            session.rollback()
+            return False
+        job = session.get_one(Job, lease.job_id)
+        event = session.execute(
+            select(Event).where(Event.id == job.event_id).with_for_update()
+        ).scalar_one()
+        entries = {c.name: session.get_one(Entry, c.entry_id) for c in plan.cars if c.entry_id}
+        race = crud.record_race(session, self.storage, event, result, entries, commit=False)
+        race.job_id = job.id
+        if event.race_type == "head_to_model":
+            crud.rate_race(session, race, commit=False)
+        session.commit()
+        return True
+
+    def _fail(self, lease: Lease, error: str) -> None:
+        """Fail the job for good: a race that cannot run will not run on a retry either."""
+        self._retry_db(lambda session: fail_job(session, lease, error, retry=False))
+        log.warning("job %d failed: %s", lease.job_id, error)
+
+    def _ticker(self, holder: list[Lease]) -> Callable[[], None]:
+        every = self.settings.lease_seconds / 3
+        last = [time.monotonic()]
+
+        def tick() -> None:
+            if time.monotonic() - last[0] < every:
+                return
+            last[0] = time.monotonic()
+            try:
+                with self.sessions() as session:
+                    renewed = heartbeat(session, holder[0], self.settings.lease_seconds)
+            except DB_ERRORS as exc:  # keep racing; the result transaction decides
+                log.warning("heartbeat failed (%s)", type(exc).__name__)
+                return
+            if renewed is None:
+                raise LeaseLost(f"job {holder[0].job_id}")
+            holder[0] = renewed
+
+        return tick
+
+    def _retry_db(self, action: Callable[[Any], bool]) -> bool:
+        """Run ``action(session)`` until the database answers (or the worker must stop)."""
+        while True:
+            try:
+                with self.sessions() as session:
+                    return action(session)
+            except DB_ERRORS as exc:
+                self._wait_db(exc)
+
+    def _wait_db(self, exc: Exception) -> None:
+        delay = self.backoff.next()
+        log.warning("database unavailable (%s); retrying in %.1f s", type(exc).__name__, delay)
+        self._sleep(delay)
+
+    def _sleep(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while not self.stopping and time.monotonic() < end:
+            time.sleep(min(0.2, end - time.monotonic()))
+
+
+def spawn(index: int) -> subprocess.Popen:
+    """Start one worker process with one BLAS/OpenMP thread (settings from the environment)."""
+    env = {**os.environ, **dict.fromkeys(THREAD_VARS, "1")}
+    name = f"{socket.gethostname()}-{os.getpid()}-{index}"
+    return subprocess.Popen([sys.executable, "-m", "league.worker", "--name", name], env=env)
+
+
+def supervise(concurrency: int) -> None:
+    """Run ``concurrency`` worker processes; restart any that die; stop them on a signal."""
+    stopping = []
+    signal.signal(signal.SIGTERM, lambda *_: stopping.append(True))
+    signal.signal(signal.SIGINT, lambda *_: stopping.append(True))
+    procs = [spawn(i) for i in range(concurrency)]
+    backoff = Backoff(cap=30.0)
+    while not stopping:
+        time.sleep(0.5)
+        for i, proc in enumerate(procs):
+            if proc.poll() is not None and not stopping:
+                delay = backoff.next()
+                log.warning(
+                    "worker %d exited (%s); restarting in %.1f s", i, proc.returncode, delay
+                )
+                time.sleep(delay)
+                procs[i] = spawn(i)
+    for proc in procs:
+        proc.send_signal(signal.SIGTERM)
+    for proc in procs:
+        proc.wait()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m league.worker [--name NAME]``: one worker process (settings from env)."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("--name", default=None)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    Worker(Settings(), args.name).run_forever()
+
+
+if __name__ == "__main__":
+    main()

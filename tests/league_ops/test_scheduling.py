@@ -1,0 +1,95 @@
+"""Matchmaking and the scheduler's duties (in-process), and two scheduler daemons at once."""
+
+from __future__ import annotations
+
+import random
+import signal
+import time
+from collections import Counter
+from datetime import timedelta
+
+from sqlalchemy import select, update
+
+from league.matchmaking import Candidate, plan_round
+from league.models import Entry, Event, Job, utcnow
+from league.ranking import initial_skill
+from league.scheduler import Scheduler
+from league.worker import Worker
+from tests.league_ops.conftest import Ops
+from tests.league_ops.helpers import enter, event, model, racer, statuses, wait_until
+
+
+def test_every_model_races_k_times_in_grids_of_two_to_max() -> None:
+    field = [Candidate(i, 25.0 + i, 8.0) for i in range(9)]
+    grids = plan_round(field, k=3, max_cars=4, rng=random.Random(1))
+    counts = Counter(slot["entry_id"] for grid in grids for slot in grid)
+    assert min(counts.values()) >= 3
+    assert all(2 <= len(g) <= 4 and len({str(s) for s in g}) == len(g) for g in grids)
+
+
+def test_close_ratings_meet_more_often() -> None:
+    field = [Candidate(0, 25, 3), Candidate(1, 25.5, 3), Candidate(2, 45, 3)]
+    pairs = Counter()
+    for seed in range(200):
+        (grid, *_) = plan_round(field, k=1, max_cars=2, rng=random.Random(seed))
+        pairs[frozenset(s["entry_id"] for s in grid)] += 1
+    assert pairs[frozenset({0, 1})] > 3 * pairs[frozenset({0, 2})]
+
+
+def test_a_lone_model_races_a_bot() -> None:
+    (grid,) = plan_round([Candidate(7, 25, 8)], k=1, max_cars=4, rng=random.Random(0))
+    assert grid == [{"entry_id": 7}, {"bot": "pursuit"}]
+
+
+def test_rounds_rate_models_and_closing_writes_standings(ops: Ops) -> None:
+    ev = event(ops, race_type="head_to_model", round_interval_s=60, seeds=[0])
+    for alias in ("ada", "bob", "cyd"):
+        enter(ops, ev, model(ops, racer(ops, alias), seed=len(alias) + ord(alias[0])))
+    scheduler = Scheduler(ops.settings)
+    now = utcnow()
+    assert scheduler.tick(now)["round_jobs"] == 2  # 3 models, k = 2, 3 cars a race
+    assert scheduler.tick(now)["round_jobs"] == 0  # not due again yet
+    worker = Worker(ops.settings, "w")
+    while worker.run_once():
+        pass
+    assert statuses(ops) == {"done": 2}
+    with ops.sessions() as session:
+        session.execute(update(Event).values(closes_at=now + timedelta(seconds=90)))
+        session.commit()
+    assert scheduler.tick(now + timedelta(seconds=61))["round_jobs"] == 2
+    while worker.run_once():
+        pass
+    assert scheduler.tick(now + timedelta(seconds=120))["closed"] == 1
+    with ops.sessions() as session:
+        final = session.get_one(Event, ev.id).final_standings
+    assert [row["rank"] for row in final] == [1, 2, 3]
+    assert all(row["sigma"] < 25 / 3 and row["ordinal"] is not None for row in final)
+
+
+def test_two_scheduler_daemons_make_no_duplicate_jobs(ops: Ops) -> None:
+    trial = event(ops, seeds=[0, 1, 2])
+    h2h = event(ops, race_type="head_to_model", round_interval_s=60, seeds=[0])
+    with ops.sessions() as session:  # entries the API queued no jobs for (scheduler's job)
+        for i in range(6):
+            md = model(ops, racer(ops, f"r{i}"), seed=i)
+            session.add(Entry(event_id=trial.id, model_id=md.id, racer_id=md.owner_id))
+            session.add(Entry(event_id=h2h.id, model_id=md.id, racer_id=md.owner_id))
+        session.commit()
+        ids = session.scalars(select(Entry.id).where(Entry.event_id == h2h.id)).all()
+    start = initial_skill()
+    field = [Candidate(i, start.mu, start.sigma) for i in sorted(ids)]
+    expected = plan_round(field, 2, 4, random.Random(f"{h2h.id}:1"))
+    procs = [ops.start("scheduler", f"scheduler{i}", poll_seconds=0.05) for i in range(2)]
+    wait_until(lambda: statuses(ops).get("queued", 0) >= 18 + len(expected), 30, "jobs")
+    time.sleep(1.0)  # both keep ticking over the same rows
+    for proc in procs:
+        proc.send_signal(signal.SIGTERM)
+    assert [proc.wait(timeout=10) for proc in procs] == [0, 0]
+    with ops.sessions() as session:
+        jobs = session.scalars(select(Job)).all()
+    evaluations = Counter((j.entry_id, j.seed) for j in jobs if j.kind == "evaluation")
+    assert len(evaluations) == 18 and set(evaluations.values()) == {1}
+    rounds = [j for j in jobs if j.kind == "round"]
+    assert {j.round for j in rounds} == {1}  # one round, planned once
+    assert [j.lineup for j in sorted(rounds, key=lambda j: j.seed)] == expected
+    assert "scheduler stopped" in ops.log("scheduler0") + ops.log("scheduler1")
