@@ -1,4 +1,4 @@
-"""The root ``slipstream`` command: demo and race, through Typer's runner."""
+"""The root ``slipstream`` command's race, through Typer's runner (demo: test_demo.py)."""
 
 from __future__ import annotations
 
@@ -12,19 +12,6 @@ from typer.testing import CliRunner
 from league.cli import app
 
 runner = CliRunner()
-
-
-@pytest.mark.slow
-def test_demo_prints_every_builtin_track_and_draws_one(tmp_path: Path) -> None:
-    from tracks.catalog import builtin_names
-
-    result = runner.invoke(app, ["demo", "--out", str(tmp_path)])
-    assert result.exit_code == 0, result.output
-    for name in builtin_names():
-        assert name[:10] in result.output
-    assert "limit lap" in result.output
-    png = tmp_path / "beginner_loop.png"
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.mark.slow

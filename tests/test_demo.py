@@ -1,0 +1,40 @@
+"""``slipstream demo`` end to end: real server, scheduler and worker processes."""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def test_demo_runs_entries_to_leaderboards(tmp_path: Path) -> None:
+    port = _free_port()
+    args = ["demo", "--out", str(tmp_path), "--port", str(port), "--no-serve", "--timeout", "240"]
+    done = subprocess.run(
+        [sys.executable, "-m", "league", *args],
+        capture_output=True,
+        text=True,
+        timeout=420,
+        cwd=tmp_path,
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    out = done.stdout
+    assert "beginner_loop" in out and (tmp_path / "beginner_loop.png").exists()
+    for title in ("Time Trial", "Object Avoidance", "Head-to-Bot", "Head-to-Model"):
+        assert title in out
+    assert out.count("alice") >= 4 and out.count("bob") >= 4  # a row per event
+    assert "not every first race finished" not in out
+    assert "stopped the server, the scheduler and the worker" in out
+    with socket.socket() as sock:  # the server is gone
+        assert sock.connect_ex(("127.0.0.1", port)) != 0
