@@ -120,6 +120,16 @@ class CarState:
     yaw_rate: float
 
 
+@dataclass(frozen=True)
+class CarSnapshot:
+    """Everything the rules and sensors read from a car at one instant."""
+
+    state: CarState
+    model_point: np.ndarray
+    wheel_points: np.ndarray
+    footprint: np.ndarray
+
+
 def _yaw_of(quat: tuple[float, float, float, float]) -> float:
     qx, qy, qz, qw = quat
     return math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
@@ -273,6 +283,22 @@ class Car:
         ox, oy = -self._com_ahead * cos, -self._com_ahead * sin
         vx, vy = vx - wz * oy, vy + wz * ox
         return CarState(cx + ox, cy + oy, yaw, vx * cos + vy * sin, vx, vy, wz)
+
+    def snapshot(self) -> CarSnapshot:
+        """State, model point, wheel points and footprint from one pose query."""
+        cx, cy, yaw = self._base()
+        (vx, vy, _), (_, _, wz) = p.getBaseVelocity(self.body_id, physicsClientId=self.client)
+        cos, sin = math.cos(yaw), math.sin(yaw)
+        ox, oy = -self._com_ahead * cos, -self._com_ahead * sin
+        vx, vy = vx - wz * oy, vy + wz * ox
+        state = CarState(cx + ox, cy + oy, yaw, vx * cos + vy * sin, vx, vy, wz)
+        rotation = np.array([[cos, sin], [-sin, cos]])
+        local = np.vstack(
+            [[self.spec.model_point_ahead - self._com_ahead, 0.0], self._wheel_offsets,
+             self._footprint]
+        )  # fmt: skip
+        world = local @ rotation + (cx, cy)
+        return CarSnapshot(state, world[0], world[1:5], world[5:9])
 
     def _to_world(self, local: np.ndarray) -> np.ndarray:
         cx, cy, yaw = self._base()

@@ -21,7 +21,7 @@ from pettingzoo import ParallelEnv
 
 from arena import world
 from arena.camera import Box3D, CameraRenderer
-from arena.car import Car, CarSpec
+from arena.car import Car, CarSnapshot, CarSpec
 from arena.config import ConfigError, RaceConfig
 from arena.drivers import LaneFollower
 from arena.lidar import Lidar, clip_lidar, discretized_sector_lidar, sector_lidar
@@ -231,6 +231,7 @@ class RacingEnv(ParallelEnv):
         self._lidar = Lidar(client)
         self._car_episodes = dict.fromkeys(self.possible_agents, 0)
         self._scene_cache: _Scene | None = None
+        self._snaps: dict[int, CarSnapshot] = {}
         self._body_owner = {live.car.body_id: a for a, live in self._cars.items()}
         self._bot_bodies = {bot.car.body_id for bot in self._bots}
         self._obstacle_bodies = {o.body: o for o in self._obstacles}
@@ -255,7 +256,7 @@ class RacingEnv(ParallelEnv):
                 live.car.apply_command(steer, speed)
         self._drive_bots()
         world.step(self._client, self._physics)
-        self._scene_cache = None
+        self._forget_poses()
         self.time += self.config.control_dt
         for agent in self.agents:
             hold = self._cars[agent].hold
@@ -284,15 +285,16 @@ class RacingEnv(ParallelEnv):
             if self.time >= bot.next_change:
                 bot.driver.lane = "outer" if bot.driver.lane == "inner" else "inner"
                 bot.next_change = self._next_lane_change()
-            state = bot.car.state()
+            state = self._snap(bot.car).state
             bot.car.apply_command(*bot.driver.command(state.x, state.y, state.yaw))
 
     def _judge(self) -> dict[str, dict[str, Any]]:
         """Measure every live car, apply the rules, respawn or hold penalised cars."""
         agents = self.agents
-        states = {a: self._cars[a].car.state() for a in agents}
-        points = np.array([self._cars[a].car.model_point() for a in agents])
-        wheels = np.vstack([self._cars[a].car.wheel_points() for a in agents])
+        snaps = {a: self._snap(self._cars[a].car) for a in agents}
+        states = {a: snap.state for a, snap in snaps.items()}
+        points = np.array([snap.model_point for snap in snaps.values()])
+        wheels = np.vstack([snap.wheel_points for snap in snaps.values()])
         on_road = self.track.contains(wheels).reshape(len(agents), 4)
         projection = self.track.project(points)
         crash_with = self._at_fault_crashes(agents, projection.arc_length)
@@ -347,7 +349,7 @@ class RacingEnv(ParallelEnv):
         arc_of = {self._cars[a].car.body_id: float(arcs[i]) for i, a in enumerate(agents)}
         if self._bots:
             bot_arcs = self.track.project(
-                np.array([b.car.model_point() for b in self._bots])
+                np.array([self._snap(b.car).model_point for b in self._bots])
             ).arc_length
             arc_of.update(
                 {b.car.body_id: float(s) for b, s in zip(self._bots, bot_arcs, strict=True)}
@@ -382,6 +384,7 @@ class RacingEnv(ParallelEnv):
         place = respawn_place(self.track, rec.last_arc, offset, hit)
         live.hold = place
         live.car.teleport(place.x, place.y, place.yaw)
+        self._forget_poses()
         live.last_point = live.car.model_point()
         self._rules.respawned(rec, self._arc_of(live.last_point))
 
@@ -394,6 +397,7 @@ class RacingEnv(ParallelEnv):
             index = self.possible_agents.index(agent)
             live.car.teleport(PARK_DISTANCE + 10.0 * index, PARK_DISTANCE, 0.0)
             live.parked = True
+            self._forget_poses()
 
     def restart_car(self, agent: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Start a new training episode for one car whose episode ended, others racing on.
@@ -414,12 +418,24 @@ class RacingEnv(ParallelEnv):
         live.last_point = live.car.model_point()
         live.record = self._rules.start(self._arc_of(live.last_point), self.time)
         live.hold, live.parked, live.command = None, False, (0.0, 0.0)
-        self._scene_cache = None
+        self._forget_poses()
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
         observation = self._observe_one(agent)
         return observation, self._info(agent, self._initial_params(agent))
 
     # ------------------------------------------------------------ observations
+    def _snap(self, car: Car) -> CarSnapshot:
+        """The car's pose and points now, read from PyBullet once per step."""
+        snap = self._snaps.get(car.body_id)
+        if snap is None:
+            snap = self._snaps[car.body_id] = car.snapshot()
+        return snap
+
+    def _forget_poses(self) -> None:
+        """Drop the per-step caches (after physics ran or a car was moved)."""
+        self._snaps.clear()
+        self._scene_cache = None
+
     def _scene(self) -> _Scene:
         """Every object on track now (obstacles, bots, racing cars), computed once a step."""
         if self._scene_cache is not None:
@@ -439,12 +455,13 @@ class RacingEnv(ParallelEnv):
             if not self._cars[a].parked
         ]
         for owner, car, gray in movers:
-            state = car.state()
+            snap = self._snap(car)
+            state = snap.state
             owners.append(owner)
-            locations.append(tuple(car.model_point()))
+            locations.append(tuple(snap.model_point))
             headings.append(math.degrees(state.yaw))
             speeds.append(abs(state.speed))
-            cx, cy = car.footprint().mean(axis=0)
+            cx, cy = snap.footprint.mean(axis=0)
             boxes.append(Box3D(cx, cy, state.yaw, spec.length, spec.width, spec.height, gray))
         if locations:
             loc = np.array(locations, dtype=float)
@@ -473,7 +490,7 @@ class RacingEnv(ParallelEnv):
 
     def _observe_one(self, agent: str) -> dict[str, np.ndarray]:
         car = self._cars[agent].car
-        state = car.state()
+        state = self._snap(car).state
         sensors = self._car_configs[agent].sensors
         lidar_cfg = self._car_configs[agent].lidar_config
         obs: dict[str, np.ndarray] = {}
