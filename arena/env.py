@@ -522,15 +522,14 @@ class RacingEnv(ParallelEnv):
         return {name: obs[name] for name in self._obs_spaces[agent].spaces}
 
     def _initial_params(self, agent: str) -> dict[str, Any]:
-        live = self._cars[agent]
-        point = live.car.model_point()
-        projection = self.track.project(point[None, :])
-        wheels_on = self.track.contains(live.car.wheel_points())
+        snap = self._snap(self._cars[agent].car)
+        projection = self.track.project(snap.model_point[None, :])
+        wheels_on = self.track.contains(snap.wheel_points)
         return build_params(
             track=self.track,
             is_reversed=self.is_reversed,
-            model_point=point,
-            yaw=live.car.state().yaw,
+            model_point=snap.model_point,
+            yaw=snap.state.yaw,
             projection=projection,
             index=0,
             progress=0.0,

@@ -6,7 +6,6 @@ import csv
 import io
 import math
 import zipfile
-from datetime import datetime
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path
@@ -17,31 +16,13 @@ from league.api.deps import SessionDep, StorageDep
 from league.auth import CurrentRacer
 from league.models import Model, Racer
 from league.schemas import MAX_ID, ErrorOut
-from league.web.queries import model_races
+from league.web.queries import ModelRace, model_races
 from submissions.format import METRICS_MEMBER
 
 router = APIRouter(prefix="/api/models", tags=["models"])
 ModelId = Annotated[int, Path(ge=1, le=MAX_ID)]
 NOT_FOUND = {404: {"model": ErrorOut, "description": "Not one of your models, or no metrics"}}
 MAX_METRIC_ROWS = 20_000
-
-
-class ModelRaceOut(BaseModel):
-    """One race of the model: its car's result (times in ms)."""
-
-    race_id: int
-    event_id: int
-    event_name: str
-    car_name: str
-    status: str
-    laps: int
-    lap_times_ms: list[int]
-    best_ms: int | None
-    total_ms: int | None
-    off_track_count: int
-    crash_count: int
-    finish_position: int
-    created_at: datetime
 
 
 class Metrics(BaseModel):
@@ -59,15 +40,13 @@ def owned_model(session: Session, racer: Racer, model_id: int) -> Model:
     return model
 
 
-@router.get("/{model_id}/races", response_model=list[ModelRaceOut], responses=NOT_FOUND)
+@router.get("/{model_id}/races", response_model=list[ModelRace], responses=NOT_FOUND)
 def read_model_races(
     model_id: ModelId, racer: CurrentRacer, session: SessionDep
-) -> list[ModelRaceOut]:
+) -> list[ModelRace]:
     """Your model's results history, newest first."""
     model = owned_model(session, racer, model_id)
-    return [
-        ModelRaceOut.model_validate(r, from_attributes=True) for r in model_races(session, model)
-    ]
+    return model_races(session, model)
 
 
 def _number(text: str | None) -> float | None:

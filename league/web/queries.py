@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from datetime import datetime
 
+from pydantic import BaseModel
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
 
@@ -56,9 +57,8 @@ def event_cards(session: Session, limit: int = 100) -> list[EventCard]:
     ]
 
 
-@dataclass(frozen=True)
-class ModelRace:
-    """One race a model drove in, as its results history shows it."""
+class ModelRace(BaseModel):
+    """One race a model drove in, as its results history (page and JSON) shows it."""
 
     race_id: int
     event_id: int
