@@ -95,7 +95,10 @@ def test_kill_9_workers_mid_race_every_job_completes_exactly_once(ops: Ops) -> N
     workers = {i: ops.start("worker", f"worker{i}") for i in range(2)}
     kills, deadline = 0, time.monotonic() + 150
     while not all_settled(ops) and kills < 14 and time.monotonic() < deadline:
-        time.sleep(rng.uniform(0.5, 2.5))
+        # Kill while a race is under way (races are short: waiting blindly can miss them).
+        while not statuses(ops).get("running") and not all_settled(ops):
+            time.sleep(0.05)
+        time.sleep(rng.uniform(0.0, 0.5))
         victim = rng.choice(list(workers))
         workers[victim].send_signal(signal.SIGKILL)
         workers[victim].wait()
