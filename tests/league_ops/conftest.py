@@ -77,6 +77,16 @@ def _postgres(base: str) -> tuple[str, object]:
 
     def drop() -> None:
         with admin.connect() as conn:
+            # Connections a cut proxy left open upstream may still hold locks: end them,
+            # and never wait forever for the drop.
+            conn.execute(
+                text(
+                    "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE "
+                    "datname = current_database() AND pid <> pg_backend_pid() "
+                    "AND state LIKE 'idle in transaction%'"
+                )
+            )
+            conn.execute(text("SET lock_timeout = '30s'"))
             conn.execute(text(f'DROP SCHEMA "{schema}" CASCADE'))
         admin.dispose()
 
