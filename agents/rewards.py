@@ -130,7 +130,7 @@ def load_reward_function(path: str | Path, race_type: str = "time_trial") -> Rew
 def _objects(track: Track, race_type: str, car_arc: float) -> ObjectsView:
     """Two boxes ahead in opposite lanes, or one car ahead and one behind."""
     if race_type == "time_trial":
-        return ObjectsView.empty(track)
+        return ObjectsView.empty()
     if race_type == "object_avoidance":
         arcs, lanes, speeds = [car_arc + 1.5, car_arc + 4.0], ["inner", "outer"], [0.0, 0.0]
     else:
@@ -141,7 +141,7 @@ def _objects(track: Track, race_type: str, car_arc: float) -> ObjectsView:
         points.append(point)
         yaws.append(math.degrees(float(yaw)))
     location = np.array(points, dtype=float)
-    return ObjectsView(location, np.array(yaws), np.array(speeds), track.project(location))
+    return ObjectsView.of(location, np.array(yaws), np.array(speeds), track.project(location))
 
 
 def sample_params(race_type: str = "time_trial", track: str | Track = "beginner_loop") -> dict:

@@ -127,7 +127,7 @@ class CarSnapshot:
     state: CarState
     model_point: np.ndarray
     wheel_points: np.ndarray
-    footprint: np.ndarray
+    centre: tuple[float, float]  # of the chassis footprint (the centre of mass)
 
 
 def _yaw_of(quat: tuple[float, float, float, float]) -> float:
@@ -161,6 +161,10 @@ class Car:
             [[half_wb, half_tr], [half_wb, -half_tr], [-half_wb, half_tr], [-half_wb, -half_tr]]
         )
         self._footprint = _corners(spec.length, spec.width)
+        # Model point and wheels in the base frame, for snapshot().
+        self._snapshot_points = np.vstack(
+            [[spec.model_point_ahead - self._com_ahead, 0.0], self._wheel_offsets]
+        )
         self.body_id = self._build(color)
         self.teleport(x, y, yaw)
 
@@ -285,7 +289,7 @@ class Car:
         return CarState(cx + ox, cy + oy, yaw, vx * cos + vy * sin, vx, vy, wz)
 
     def snapshot(self) -> CarSnapshot:
-        """State, model point, wheel points and footprint from one pose query."""
+        """State, model point, wheel points and footprint centre from one pose query."""
         cx, cy, yaw = self._base()
         (vx, vy, _), (_, _, wz) = p.getBaseVelocity(self.body_id, physicsClientId=self.client)
         cos, sin = math.cos(yaw), math.sin(yaw)
@@ -293,12 +297,8 @@ class Car:
         vx, vy = vx - wz * oy, vy + wz * ox
         state = CarState(cx + ox, cy + oy, yaw, vx * cos + vy * sin, vx, vy, wz)
         rotation = np.array([[cos, sin], [-sin, cos]])
-        local = np.vstack(
-            [[self.spec.model_point_ahead - self._com_ahead, 0.0], self._wheel_offsets,
-             self._footprint]
-        )  # fmt: skip
-        world = local @ rotation + (cx, cy)
-        return CarSnapshot(state, world[0], world[1:5], world[5:9])
+        world = self._snapshot_points @ rotation + (cx, cy)
+        return CarSnapshot(state, world[0], world[1:5], (cx, cy))
 
     def _to_world(self, local: np.ndarray) -> np.ndarray:
         cx, cy, yaw = self._base()
@@ -328,6 +328,20 @@ class Car:
         for joint in range(len(_STEER_JOINTS) + len(_WHEEL_JOINTS)):
             p.resetJointState(self.body_id, joint, 0.0, 0.0, physicsClientId=c)
         self.stop()
+
+    def hold(self, x: float, y: float, yaw: float) -> None:
+        """Put a car that was :meth:`teleport`-ed to ``(x, y, yaw)`` back there, at rest.
+
+        Cheaper than ``teleport`` for a car held in place step after step: only the base
+        is reset; the wheels were stopped when it was first placed.
+        """
+        c = self.client
+        com = [x + self._com_ahead * math.cos(yaw), y + self._com_ahead * math.sin(yaw)]
+        quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
+        p.resetBasePositionAndOrientation(
+            self.body_id, [*com, _COM_HEIGHT], quat, physicsClientId=c
+        )
+        p.resetBaseVelocity(self.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
 
     def stop(self) -> None:
         """Zero all velocities in place and hold the wheels still (steering unchanged)."""

@@ -24,14 +24,20 @@ from arena.camera import Box3D, CameraRenderer
 from arena.car import Car, CarSnapshot, CarSpec
 from arena.config import ConfigError, RaceConfig
 from arena.drivers import LaneFollower
-from arena.lidar import Lidar, clip_lidar, discretized_sector_lidar, sector_lidar
+from arena.lidar import (
+    Lidar,
+    clip_lidar,
+    discretized_sector_lidar,
+    lidar_reach,
+    sector_lidar,
+)
 from arena.params import ObjectsView, build_params, check_reward
 from arena.rewards import follow_center_line
 from arena.rules import CarRecord, EpisodeStatus, Measurement, RuleBook
 from arena.sensors_spec import observation_space
 from arena.spawn import Placement, bot_places, car_grid, obstacle_places, respawn_place, start_arc
 from tracks.catalog import get_track
-from tracks.track import Track, TrackError
+from tracks.track import Projection, Track, TrackError
 
 RewardFunction = Callable[[dict[str, Any]], float]
 CAR_COLORS = [
@@ -47,6 +53,9 @@ CAR_COLORS = [
 BOT_COLOR = (0.15, 0.15, 0.15, 1.0)
 CAR_GRAY, BOT_GRAY, BOX_GRAY = 90, 40, 200
 PARK_DISTANCE = 1000.0
+# Lidar culling circles reach this far beyond an object's footprint: a car tilting in a
+# collision leans a little outside it.
+LIDAR_CULL_MARGIN = 0.03
 
 
 @dataclass
@@ -69,8 +78,10 @@ class _Scene:
     """Objects on track at one instant, with the controlled car each belongs to (if any)."""
 
     objects: ObjectsView
+    projection: Projection
     boxes: list[Box3D]
     owners: list[str | None]
+    targets: np.ndarray
 
 
 @dataclass
@@ -128,6 +139,12 @@ class RacingEnv(ParallelEnv):
         self.possible_agents = [car.name for car in config.cars]
         self.agents: list[str] = []
         self._car_configs = {car.name: car for car in config.cars}
+        # How far each lidar car's views look (cars without a lidar are absent).
+        self._lidar_reach = {
+            c.name: lidar_reach(c.sensors, c.lidar_config)
+            for c in config.cars
+            if any("lidar" in s for s in c.sensors)
+        }
         self._rewards = self._reward_table(reward_functions)
         self._obs_spaces = {
             c.name: observation_space(c.sensors, c.lidar_config) for c in config.cars
@@ -261,7 +278,7 @@ class RacingEnv(ParallelEnv):
         for agent in self.agents:
             hold = self._cars[agent].hold
             if hold is not None:
-                self._cars[agent].car.teleport(hold.x, hold.y, hold.yaw)
+                self._cars[agent].car.hold(hold.x, hold.y, hold.yaw)
 
         judged = self._judge()
         observations = self._observe()
@@ -296,14 +313,14 @@ class RacingEnv(ParallelEnv):
         points = np.array([snap.model_point for snap in snaps.values()])
         wheels = np.vstack([snap.wheel_points for snap in snaps.values()])
         on_road = self.track.contains(wheels).reshape(len(agents), 4)
-        projection = self.track.project(points)
+        projection = self._projection_of(agents, points)
         crash_with = self._at_fault_crashes(agents, projection.arc_length)
         params = {}
         for i, agent in enumerate(agents):
             live = self._cars[agent]
             rec = live.record
             was_frozen = rec.frozen
-            moved = float(np.linalg.norm(points[i] - live.last_point))
+            moved = math.dist(points[i], live.last_point)
             live.last_point = points[i]
             status = self._rules.update(
                 rec,
@@ -337,6 +354,13 @@ class RacingEnv(ParallelEnv):
                 waypoints=self._waypoints,
             )
         return params
+
+    def _projection_of(self, agents: list[str], points: np.ndarray) -> Projection:
+        """The centre-line projection of the cars' model points, from the scene if it has them."""
+        scene = self._scene()
+        if all(agent in scene.owners for agent in agents):
+            return scene.projection.rows([scene.owners.index(agent) for agent in agents])
+        return self.track.project(points)
 
     def _at_fault_crashes(self, agents: list[str], arcs: np.ndarray) -> dict[str, int | None]:
         """Cars at fault for a contact this step, with the obstacle body they hit (if any).
@@ -420,7 +444,7 @@ class RacingEnv(ParallelEnv):
         live.hold, live.parked, live.command = None, False, (0.0, 0.0)
         self._forget_poses()
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
-        observation = self._observe_one(agent)
+        observation = self._observe([agent])[agent]
         return observation, self._info(agent, self._initial_params(agent))
 
     # ------------------------------------------------------------ observations
@@ -461,15 +485,16 @@ class RacingEnv(ParallelEnv):
             locations.append(tuple(snap.model_point))
             headings.append(math.degrees(state.yaw))
             speeds.append(abs(state.speed))
-            cx, cy = snap.footprint.mean(axis=0)
+            cx, cy = snap.centre
             boxes.append(Box3D(cx, cy, state.yaw, spec.length, spec.width, spec.height, gray))
-        if locations:
-            loc = np.array(locations, dtype=float)
-            heading = (np.array(headings) + 180.0) % 360.0 - 180.0
-            view = ObjectsView(loc, heading, np.array(speeds), self.track.project(loc))
-        else:
-            view = ObjectsView.empty(self.track)
-        self._scene_cache = _Scene(view, boxes, owners)
+        loc = np.array(locations, dtype=float).reshape(-1, 2)
+        heading = (np.array(headings) + 180.0) % 360.0 - 180.0
+        projection = self.track.project(loc)
+        view = ObjectsView.of(loc, heading, np.array(speeds), projection)
+        targets = np.array(
+            [(b.x, b.y, 0.5 * math.hypot(b.length, b.width) + LIDAR_CULL_MARGIN) for b in boxes]
+        ).reshape(-1, 3)
+        self._scene_cache = _Scene(view, projection, boxes, owners, targets)
         return self._scene_cache
 
     def _objects_view(self, exclude: str) -> ObjectsView:
@@ -485,19 +510,41 @@ class RacingEnv(ParallelEnv):
             box for box, owner in zip(scene.boxes, scene.owners, strict=True) if owner != exclude
         ]
 
-    def _observe(self) -> dict[str, dict[str, np.ndarray]]:
-        return {agent: self._observe_one(agent) for agent in self.agents}
+    def _observe(self, agents: list[str] | None = None) -> dict[str, dict[str, np.ndarray]]:
+        """Every sensor of ``agents`` (default: the live cars); lidars scan in one batch."""
+        agents = self.agents if agents is None else agents
+        with_lidar = [a for a in agents if a in self._lidar_reach]
+        ranges = self._scan_lidars(with_lidar) if with_lidar else {}
+        return {agent: self._observe_one(agent, ranges.get(agent)) for agent in agents}
 
-    def _observe_one(self, agent: str) -> dict[str, np.ndarray]:
+    def _scan_lidars(self, agents: list[str]) -> dict[str, np.ndarray]:
+        """Lidar ranges of ``agents``, casting only beams aimed at objects they could see."""
+        scene = self._scene()
+        poses, excludes = [], []
+        for agent in agents:
+            car = self._cars[agent].car
+            state = self._snap(car).state
+            poses.append((state.x, state.y, state.yaw))
+            excludes.append((car.body_id,))
+        visible = [[owner != agent for owner in scene.owners] for agent in agents]
+        scans = self._lidar.scan_many(
+            np.array(poses),
+            excludes,
+            rng=self.rng,
+            reach=[self._lidar_reach[agent] for agent in agents],
+            targets=scene.targets,
+            visible=np.array(visible, dtype=bool).reshape(len(agents), len(scene.owners)),
+        )
+        return dict(zip(agents, scans, strict=True))
+
+    def _observe_one(self, agent: str, ranges: np.ndarray | None) -> dict[str, np.ndarray]:
+        """One car's observation; ``ranges`` is its lidar scan if it has a lidar."""
         car = self._cars[agent].car
         state = self._snap(car).state
         sensors = self._car_configs[agent].sensors
         lidar_cfg = self._car_configs[agent].lidar_config
         obs: dict[str, np.ndarray] = {}
-        if any("lidar" in s for s in sensors):
-            ranges = self._lidar.scan(
-                state.x, state.y, state.yaw, exclude=(car.body_id,), rng=self.rng
-            )
+        if ranges is not None:
             angles = self._lidar.beam_angles
             if "lidar" in sensors:
                 obs["lidar"] = clip_lidar(ranges)

@@ -22,11 +22,15 @@ from arena.sensors_spec import (
     LIDAR_MIN_RANGE,
     LIDAR_NOISE_STD,
     SECTOR_THRESHOLD,
+    LidarConfig,
 )
 
 LIDAR_MOUNT_FORWARD = 0.0
 LIDAR_MOUNT_HEIGHT = 0.07
 _CLEARANCE = 1e-4
+# Beyond what a lidar view distinguishes, a hit still matters if noise could pull it back
+# in; ten standard deviations make that a 1e-23 event.
+_NOISE_MARGIN = 10.0 * LIDAR_NOISE_STD
 
 
 @dataclass(frozen=True)
@@ -133,6 +137,8 @@ class Lidar:
         half = 0.5 * math.radians(fov_deg)
         self.beam_angles = np.linspace(-half, half, num_beams)
         self.beam_angles.setflags(write=False)
+        self._first_beam = float(self.beam_angles[0])
+        self._beam_step = 2.0 * half / (num_beams - 1) if num_beams > 1 else 1.0
         self._shapes: dict[int, _BodyShapes] = {}
         self._exits: dict[tuple[int, ...], np.ndarray] = {}
 
@@ -144,38 +150,135 @@ class Lidar:
         exclude: Sequence[int] = (),
         rng: np.random.Generator | None = None,
         noise_std: float = LIDAR_NOISE_STD,
+        reach: float | None = None,
+        targets: np.ndarray | None = None,
     ) -> np.ndarray:
         """Ranges ``(num_beams,)`` float32 in metres from the mount of a car at ``(x, y, yaw)``.
 
         ``max_range`` where nothing is hit; hits are clipped to ``[min_range, max_range]``.
         Bodies in ``exclude`` (the car itself) are invisible. With ``rng``, hits get
         Gaussian noise of ``noise_std`` metres; without, scans are deterministic.
+
+        With ``targets``, ``(K, 3)`` ``x, y, radius`` circles covering every body the
+        beams could hit, only the beams aimed at a circle that comes within ``reach`` of
+        the mount are cast; the others read ``max_range``. For callers that look no
+        farther than ``reach`` the scan is then the same, for less work (the noise is
+        drawn for every beam, so ``rng`` advances the same either way).
         """
-        angles = self.beam_angles + yaw
-        dirs = np.zeros((len(angles), 3))
-        dirs[:, 0] = np.cos(angles)
-        dirs[:, 1] = np.sin(angles)
-        origin = np.array(
-            [
-                x + self.mount_forward * math.cos(yaw),
-                y + self.mount_forward * math.sin(yaw),
-                self.mount_height,
-            ]
-        )
-        start = self._start_distances(origin, dirs, tuple(exclude))
-        starts = origin + dirs * start[:, None]
-        ends = origin + dirs * self.max_range
-        results = p.rayTestBatch(starts, ends, numThreads=1, physicsClientId=self.client)
-        # A miss has fraction 1 (max_range); hits on excluded bodies count as misses.
-        fraction = np.fromiter((1.0 if r[0] in exclude else r[2] for r in results), float)
-        ranges = start + fraction * (self.max_range - start)
+        return self.scan_many(
+            np.array([[x, y, yaw]], dtype=float),
+            [tuple(exclude)],
+            rng=rng,
+            noise_std=noise_std,
+            reach=None if reach is None else [reach],
+            targets=targets,
+        )[0]
+
+    def scan_many(
+        self,
+        poses: np.ndarray,
+        excludes: Sequence[Sequence[int]],
+        rng: np.random.Generator | None = None,
+        noise_std: float = LIDAR_NOISE_STD,
+        reach: Sequence[float] | None = None,
+        targets: np.ndarray | None = None,
+        visible: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """:meth:`scan` for ``N`` cars at once, in one batch of rays: ``(N, num_beams)``.
+
+        ``poses`` is ``(N, 3)`` ``x, y, yaw``; ``excludes[n]``, ``reach[n]`` are car
+        ``n``'s; ``visible`` ``(N, K)`` says which ``targets`` car ``n`` may see (not its
+        own circle). Each car's ranges are those :meth:`scan` gives it alone.
+        """
+        poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+        num_cars, num_beams = len(poses), len(self.beam_angles)
+        mounts = [
+            (x + self.mount_forward * math.cos(yaw), y + self.mount_forward * math.sin(yaw), yaw)
+            for x, y, yaw in poses.tolist()
+        ]
+        aimed = np.zeros((num_cars, num_beams), dtype=bool)
+        if targets is None:
+            aimed[:] = True
+        else:
+            circles = np.asarray(targets, dtype=float).reshape(-1, 3).tolist()
+            sees = np.ones((num_cars, len(circles)), dtype=bool) if visible is None else visible
+            for n, (mx, my, yaw) in enumerate(mounts):
+                look = self.max_range if reach is None else min(float(reach[n]), self.max_range)
+                for k, (tx, ty, radius) in enumerate(circles):
+                    if sees[n, k]:
+                        self._aim(aimed[n], tx - mx, ty - my, radius, yaw, look)
+        ranges = np.full((num_cars, num_beams), self.max_range)
+        hit = np.zeros((num_cars, num_beams), dtype=bool)
+        car, beam = np.nonzero(aimed)
+        if len(car):
+            origins = np.array([(mx, my, self.mount_height) for mx, my, _ in mounts])
+            yaw = poses[:, 2]
+            starts = np.stack(
+                [
+                    self._start_distances(origins[n], yaw[n], tuple(excludes[n]))
+                    for n in range(num_cars)
+                ]
+            )[car, beam]
+            angles = self.beam_angles[beam] + yaw[car]
+            dirs = np.stack([np.cos(angles), np.sin(angles), np.zeros(len(angles))], axis=1)
+            fraction = self._cast(origins[car], dirs, starts, car, excludes)
+            hit[car, beam] = fraction < 1.0
+            ranges[car, beam] = starts + fraction * (self.max_range - starts)
         if rng is not None and noise_std > 0.0:
             noise = rng.normal(0.0, noise_std, ranges.shape)
-            ranges = np.where(fraction < 1.0, ranges + noise, ranges)
+            ranges = np.where(hit, ranges + noise, ranges)
         return np.clip(ranges, self.min_range, self.max_range).astype(np.float32)
 
+    def _aim(
+        self, row: np.ndarray, dx: float, dy: float, radius: float, yaw: float, look: float
+    ) -> None:
+        """Mark in ``row`` the beams that could meet a circle ``(dx, dy)`` from the mount.
+
+        A ray meets a circle of radius ``r`` whose centre is ``d`` away at bearing ``b``
+        exactly when its direction is within ``asin(r / d)`` of ``b``; the beam index
+        window is rounded outwards. A circle beyond ``look`` is ignored; a mount inside
+        a circle marks every beam.
+        """
+        dist = math.hypot(dx, dy)
+        if dist - radius > look:
+            return
+        if dist <= radius:
+            row[:] = True
+            return
+        half = math.asin(radius / dist)
+        bearing = math.atan2(dy, dx) - yaw
+        first, step = self._first_beam, self._beam_step
+        for turn in (-2.0 * math.pi, 0.0, 2.0 * math.pi):
+            lo = max(math.floor((bearing + turn - half - first) / step), 0)
+            hi = min(math.ceil((bearing + turn + half - first) / step), len(row) - 1)
+            if lo <= hi:
+                row[lo : hi + 1] = True
+
+    def _cast(
+        self,
+        origins: np.ndarray,
+        dirs: np.ndarray,
+        start: np.ndarray,
+        car: np.ndarray,
+        excludes: Sequence[Sequence[int]],
+    ) -> np.ndarray:
+        """Cast beams from ``start`` to ``max_range``; the hit fraction of each (1: miss).
+
+        Beam ``i`` belongs to car ``car[i]``; its hits on ``excludes[car[i]]`` are misses.
+        """
+        begin = origins + dirs * start[:, None]
+        end = origins + dirs * self.max_range
+        results = p.rayTestBatch(begin, end, numThreads=1, physicsClientId=self.client)
+        bodies, _, fractions, _, _ = zip(*results, strict=True)
+        fraction = np.array(fractions)
+        ids = np.array(bodies)
+        for n, bodies_of_car in enumerate(excludes):
+            for body in bodies_of_car:
+                fraction[(ids == body) & (car == n)] = 1.0
+        return fraction
+
     def _start_distances(
-        self, origin: np.ndarray, dirs: np.ndarray, exclude: tuple[int, ...]
+        self, origin: np.ndarray, yaw: float, exclude: tuple[int, ...]
     ) -> np.ndarray:
         """Where each beam leaves the excluded bodies, cached per set of bodies.
 
@@ -184,9 +287,11 @@ class Lidar:
         change from scan to scan; they are measured once at the first scan.
         """
         if not exclude:
-            return np.zeros(len(dirs))
+            return np.zeros(len(self.beam_angles))
         cached = self._exits.get(exclude)
         if cached is None:
+            angles = self.beam_angles + yaw
+            dirs = np.stack([np.cos(angles), np.sin(angles), np.zeros(len(angles))], axis=1)
             cached = self._exits[exclude] = self._own_body_exit(origin, dirs, exclude)
         return cached
 
@@ -215,6 +320,24 @@ class Lidar:
         t_near = np.maximum(np.maximum(lo[..., 0], lo[..., 1]), lo[..., 2])
         t_far[~(t_near <= t_far)] = 0.0
         return np.maximum(t_far.max(axis=0) + _CLEARANCE, _CLEARANCE)
+
+
+def lidar_reach(sensors: Sequence[str], config: LidarConfig) -> float:
+    """How far a car's lidar views look: beyond it every range reads the same to them.
+
+    ``lidar`` is clipped at ``LIDAR_CLIP``, ``sector_lidar`` thresholds at
+    ``SECTOR_THRESHOLD`` and ``discretized_sector_lidar`` clips at ``clipping_dist``;
+    a noise margin is added so that culling never changes an observation.
+    """
+    looks = {
+        "lidar": LIDAR_CLIP,
+        "sector_lidar": SECTOR_THRESHOLD,
+        "discretized_sector_lidar": config.clipping_dist,
+    }
+    needed = [looks[name] for name in sensors if name in looks]
+    if not needed:
+        return LIDAR_MAX_RANGE
+    return min(max(needed) + _NOISE_MARGIN, LIDAR_MAX_RANGE)
 
 
 def clip_lidar(ranges: np.ndarray) -> np.ndarray:

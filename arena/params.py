@@ -7,7 +7,8 @@ the race has other objects (obstacles, bots or other cars).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,31 +21,56 @@ CAMERA_RANGE_M = 6.0
 
 @dataclass(frozen=True)
 class ObjectsView:
-    """Other objects on track at one instant (all arrays of shape ``(K,)`` or ``(K, 2)``)."""
+    """Other objects on track at one instant, as the params' object lists (one entry each).
 
-    location: np.ndarray
-    heading_deg: np.ndarray
-    speed: np.ndarray
-    projection: Projection
+    Built once per step from arrays with :meth:`of`; :meth:`without` then hands each car
+    the others cheaply.
+    """
+
+    location: tuple[tuple[float, float], ...]
+    heading_deg: tuple[float, ...]
+    speed: tuple[float, ...]
+    left_of_center: tuple[bool, ...]
+    distance: tuple[float, ...]
+    distance_from_center: tuple[float, ...]
 
     @classmethod
-    def empty(cls, track: Track) -> ObjectsView:
+    def of(
+        cls,
+        location: np.ndarray,
+        heading_deg: np.ndarray,
+        speed: np.ndarray,
+        projection: Projection,
+    ) -> ObjectsView:
+        """The view of objects at ``location`` ``(K, 2)`` whose centre-line projection is given."""
+        return cls(
+            location=tuple((float(x), float(y)) for x, y in location),
+            heading_deg=tuple(float(h) for h in heading_deg),
+            speed=tuple(float(v) for v in speed),
+            left_of_center=tuple(bool(o > 0) for o in projection.offset),
+            distance=tuple(float(a) for a in projection.arc_length),
+            distance_from_center=tuple(float(d) for d in projection.distance_from_center),
+        )
+
+    @classmethod
+    def empty(cls) -> ObjectsView:
         """No objects."""
-        z = np.zeros((0, 2))
-        return cls(z, np.zeros(0), np.zeros(0), track.project(z))
+        return cls((), (), (), (), (), ())
 
     def __len__(self) -> int:
         return len(self.location)
 
     def without(self, index: int) -> ObjectsView:
         """The same objects less the one at ``index`` (a car does not see itself)."""
-        keep = np.arange(len(self)) != index
-        projection = Projection(
-            **{f.name: getattr(self.projection, f.name)[keep] for f in fields(Projection)}
+        columns = (
+            self.location,
+            self.heading_deg,
+            self.speed,
+            self.left_of_center,
+            self.distance,
+            self.distance_from_center,
         )
-        return ObjectsView(
-            self.location[keep], self.heading_deg[keep], self.speed[keep], projection
-        )
+        return ObjectsView(*(values[:index] + values[index + 1 :] for values in columns))
 
 
 def heading_degrees(yaw: float) -> float:
@@ -53,22 +79,25 @@ def heading_degrees(yaw: float) -> float:
     return deg - 360.0 if deg > 180.0 else deg
 
 
-def closest_objects(track: Track, car_arc: float, object_arcs: np.ndarray) -> list[int]:
-    """``[behind, ahead]`` indices of the objects nearest along the track."""
-    gaps = object_arcs - car_arc
+def closest_objects(track: Track, car_arc: float, object_arcs: Sequence[float]) -> list[int]:
+    """``[behind, ahead]`` indices of the objects nearest along the track (first on ties)."""
+    gaps = [arc - car_arc for arc in object_arcs]
+    order = range(len(gaps))
     if track.is_loop:
-        gaps = np.mod(gaps, track.length)
-    ahead = int(np.argmin(np.where(gaps >= 0, gaps, np.inf)))
-    behind_gap = gaps if not track.is_loop else gaps - track.length
-    behind = int(np.argmax(np.where(behind_gap < 0, behind_gap, -np.inf)))
-    if not track.is_loop and not (gaps < 0).any():
-        behind = ahead
-    if not track.is_loop and not (gaps >= 0).any():
-        ahead = behind
-    return [behind, ahead]
+        gaps = [gap % track.length for gap in gaps]
+        return [max(order, key=gaps.__getitem__), min(order, key=gaps.__getitem__)]
+    ahead = [i for i in order if gaps[i] >= 0]
+    behind = [i for i in order if gaps[i] < 0]
+    nearest_ahead = min(ahead, key=gaps.__getitem__) if ahead else None
+    nearest_behind = max(behind, key=gaps.__getitem__) if behind else None
+    if nearest_ahead is None:
+        nearest_ahead = nearest_behind
+    if nearest_behind is None:
+        nearest_behind = nearest_ahead
+    return [int(nearest_behind), int(nearest_ahead)]
 
 
-def object_in_camera(x: float, y: float, yaw: float, location: np.ndarray) -> bool:
+def object_in_camera(x: float, y: float, yaw: float, location: Sequence[float]) -> bool:
     """Whether a point lies in the front camera's horizontal view and range."""
     dx, dy = location[0] - x, location[1] - y
     dist = math.hypot(dx, dy)
@@ -121,18 +150,17 @@ def build_params(
         "projection_distance": float(projection.arc_length[index]),
     }
     if len(objects):
-        op = objects.projection
         params.update(
             {
                 "closest_objects": closest_objects(
-                    track, float(projection.arc_length[index]), op.arc_length
+                    track, float(projection.arc_length[index]), objects.distance
                 ),
-                "objects_location": [tuple(map(float, p)) for p in objects.location],
-                "objects_left_of_center": [bool(o > 0) for o in op.offset],
-                "objects_distance": [float(a) for a in op.arc_length],
-                "objects_distance_from_center": [float(d) for d in op.distance_from_center],
-                "objects_heading": [float(h) for h in objects.heading_deg],
-                "objects_speed": [float(v) for v in objects.speed],
+                "objects_location": list(objects.location),
+                "objects_left_of_center": list(objects.left_of_center),
+                "objects_distance": list(objects.distance),
+                "objects_distance_from_center": list(objects.distance_from_center),
+                "objects_heading": list(objects.heading_deg),
+                "objects_speed": list(objects.speed),
             }
         )
         ahead = params["closest_objects"][1]

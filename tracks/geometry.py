@@ -53,6 +53,24 @@ def cumulative_length(vertices: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(seg)])
 
 
+@dataclass(frozen=True)
+class Segments:
+    """A polyline's segments ``a -> a + d``, precomputed for repeated projections."""
+
+    a: np.ndarray
+    d: np.ndarray
+    length2: np.ndarray
+    cum_length: np.ndarray
+
+    @classmethod
+    def of(cls, vertices: np.ndarray, cum_length: np.ndarray | None = None) -> Segments:
+        """The segments of the polyline through ``vertices`` (no wrap-around)."""
+        d = vertices[1:] - vertices[:-1]
+        if cum_length is None:
+            cum_length = cumulative_length(vertices)
+        return cls(vertices[:-1], d, np.einsum("ij,ij->i", d, d), cum_length)
+
+
 def project_onto_polyline(
     points: np.ndarray, vertices: np.ndarray, cum_length: np.ndarray | None = None
 ) -> PolylineProjection:
@@ -61,10 +79,13 @@ def project_onto_polyline(
     Ties between equally close segments go to the lower segment index, so results are
     deterministic. Cost is ``O(P * S)`` in memory and time, with ``S`` segments.
     """
+    return project_onto_segments(points, Segments.of(vertices, cum_length))
+
+
+def project_onto_segments(points: np.ndarray, segments: Segments) -> PolylineProjection:
+    """:func:`project_onto_polyline` with the polyline's segments computed beforehand."""
     pts = as_points(points)
-    a = vertices[:-1]
-    d = vertices[1:] - a
-    seg_len2 = np.einsum("ij,ij->i", d, d)
+    a, d, seg_len2 = segments.a, segments.d, segments.length2
     rel = pts[:, None, :] - a[None, :, :]
     t = np.einsum("psk,sk->ps", rel, d) / np.maximum(seg_len2, EPS)
     np.clip(t, 0.0, 1.0, out=t)
@@ -75,10 +96,8 @@ def project_onto_polyline(
     frac = t[rows, seg]
     seg_d = d[seg]
     closest = a[seg] + frac[:, None] * seg_d
-    if cum_length is None:
-        cum_length = cumulative_length(vertices)
     seg_len = np.sqrt(seg_len2[seg])
-    arc = cum_length[seg] + frac * seg_len
+    arc = segments.cum_length[seg] + frac * seg_len
     to_point = pts - closest
     cross = seg_d[:, 0] * to_point[:, 1] - seg_d[:, 1] * to_point[:, 0]
     distance = np.sqrt(dist2[rows, seg])
@@ -86,15 +105,29 @@ def project_onto_polyline(
     return PolylineProjection(seg, frac, arc, offset, distance, closest)
 
 
-def crossings(points: np.ndarray, ring: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class Edges:
+    """The edges ``a -> b`` of one or more closed rings, precomputed for inside tests."""
+
+    a: np.ndarray
+    b: np.ndarray
+
+    @classmethod
+    def of_rings(cls, rings: list[np.ndarray]) -> Edges:
+        """Every ring's edges, the closing edge (last vertex back to the first) included."""
+        return cls(np.vstack(rings), np.vstack([np.roll(ring, -1, axis=0) for ring in rings]))
+
+
+def crossings(points: np.ndarray, ring: np.ndarray | Edges) -> np.ndarray:
     """Count how often a ray from each point towards +x crosses the closed ``ring``.
 
     ``ring`` is ``(M, 2)``; the edge from the last vertex back to the first is implied.
+    :class:`Edges` of several rings count the crossings of all of them.
     Used for even-odd inside tests of polygons with holes.
     """
+    edges = ring if isinstance(ring, Edges) else Edges.of_rings([ring])
     pts = as_points(points)
-    a = ring
-    b = np.roll(ring, -1, axis=0)
+    a, b = edges.a, edges.b
     px = pts[:, 0:1]
     py = pts[:, 1:2]
     ay, by = a[None, :, 1], b[None, :, 1]
@@ -104,10 +137,10 @@ def crossings(points: np.ndarray, ring: np.ndarray) -> np.ndarray:
     return np.count_nonzero(straddles & (px < x_at), axis=1)
 
 
-def inside_rings(points: np.ndarray, rings: list[np.ndarray]) -> np.ndarray:
+def inside_rings(points: np.ndarray, rings: list[np.ndarray] | Edges) -> np.ndarray:
     """Even-odd inside test of points against the region bounded by several rings."""
-    total = sum(crossings(points, ring) for ring in rings)
-    return (np.asarray(total) % 2) == 1
+    edges = rings if isinstance(rings, Edges) else Edges.of_rings(rings)
+    return (crossings(points, edges) % 2) == 1
 
 
 def segments_intersect(

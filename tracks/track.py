@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Literal
 
 import numpy as np
 
 from tracks.geometry import (
+    Edges,
+    Segments,
     as_points,
     cumulative_length,
     first_self_intersection,
     inside_rings,
-    project_onto_polyline,
+    project_onto_segments,
     signed_area,
 )
 
@@ -55,6 +57,10 @@ class Projection:
     def closest_waypoints(self) -> np.ndarray:
         """DeepRacer's ``[prev, next]`` waypoint indices, shape ``(P, 2)``."""
         return np.stack([self.segment, self.segment + 1], axis=1)
+
+    def rows(self, index: list[int] | np.ndarray) -> Projection:
+        """The projections of the points at ``index``, in that order."""
+        return Projection(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
@@ -219,6 +225,14 @@ class Track:
             return [self.left[:-1], self.right[:-1]]
         return [np.vstack([self.left, self.right[::-1]])]
 
+    @cached_property
+    def _road_edges(self) -> Edges:
+        return Edges.of_rings(self.road_rings)
+
+    @cached_property
+    def _segments(self) -> Segments:
+        return Segments.of(self.waypoints, self._cum)
+
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """``(xmin, ymin, xmax, ymax)`` over both borders."""
@@ -228,7 +242,7 @@ class Track:
     # ------------------------------------------------------------------ queries
     def project(self, points: np.ndarray) -> Projection:
         """Project points onto the centre line (vectorised over ``(P, 2)`` points)."""
-        proj = project_onto_polyline(points, self.waypoints, self._cum)
+        proj = project_onto_segments(points, self._segments)
         i, f = proj.segment, proj.fraction
         width = self.widths[i] * (1.0 - f) + self.widths[i + 1] * f
         arc = np.mod(proj.arc_length, self.length) if self.is_loop else proj.arc_length
@@ -244,7 +258,7 @@ class Track:
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """Whether each point lies on the road (inside the polygon between the borders)."""
-        return inside_rings(points, self.road_rings)
+        return inside_rings(points, self._road_edges)
 
     def wrap_arc_length(self, s: np.ndarray | float) -> np.ndarray:
         """Map arc lengths into ``[0, length)`` on loops, clip to ``[0, length]`` otherwise."""

@@ -11,7 +11,9 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 import arena
 from arena.drivers import LaneFollowerPolicy
 from arena.env import RacingEnv, resolve_track
+from arena.lidar import clip_lidar
 from arena.race import run_race
+from arena.sensors_spec import LIDAR_CLIP
 
 PARAM_KEYS = {
     "all_wheels_on_track",
@@ -274,3 +276,38 @@ def test_sensors_see_the_car_ahead() -> None:
     assert differs[:, :80].sum() > differs[:, 80:].sum()  # ... on the left
     env.close()
     alone.close()
+
+
+@pytest.mark.parametrize(
+    ("race_type", "num_cars"), [("head_to_model", 4), ("head_to_bot", 2), ("object_avoidance", 1)]
+)
+def test_lidar_culling_in_races_changes_no_view(race_type: str, num_cars: int) -> None:
+    """Scanning all cars at once, only towards nearby objects, sees what full scans see."""
+    sensors = ["lidar"]
+    env = arena.parallel_env(race_type=race_type, num_cars=num_cars, sensors=sensors)
+    _, infos = env.reset(seed=3)
+    space = env.config.cars[0].action_space
+    followers = {a: LaneFollowerPolicy(env.track, space) for a in env.agents}
+    rng = np.random.default_rng(3)
+    hits = 0
+    for _ in range(120):
+        actions = {  # half random, half lane following: the cars meet, bump and spread
+            a: followers[a].act({}, infos[a]["params"])
+            if rng.random() < 0.5
+            else int(rng.integers(env.action_space(a).n))
+            for a in env.agents
+        }
+        _, _, _, _, infos = env.step(actions)
+        noise_state = env.rng.bit_generator.state
+        seen = env._scan_lidars(env.agents)  # what the cars' observations are made of
+        env.rng.bit_generator.state = noise_state
+        for agent in env.agents:
+            car = env._cars[agent].car
+            state = car.state()
+            full = env._lidar.scan(state.x, state.y, state.yaw, [car.body_id], rng=env.rng)
+            assert np.array_equal(clip_lidar(full), clip_lidar(seen[agent]))
+            hits += int((full < LIDAR_CLIP).sum())
+        if not env.agents:
+            break
+    assert hits > 200
+    env.close()

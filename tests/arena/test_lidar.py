@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pybullet as p
 import pytest
 
-from arena.lidar import Lidar, clip_lidar, discretized_sector_lidar, sector_lidar
+from arena.lidar import (
+    Lidar,
+    clip_lidar,
+    discretized_sector_lidar,
+    lidar_reach,
+    sector_lidar,
+)
+from arena.sensors_spec import LIDAR_CLIP, LIDAR_MAX_RANGE, SENSOR_NAMES, LidarConfig
 
 
 @pytest.fixture
@@ -136,25 +142,67 @@ def test_noise_only_with_rng(client: int) -> None:
     assert np.array_equal(again, noisy[3])
 
 
-def test_scan_speed(client: int) -> None:
-    """Time per scan, median of 200, own car excluded, two other cars and a box around.
+def covering_circle(client: int, body: int) -> tuple[float, float, float]:
+    """``x, y, radius`` of a circle around a body's whole axis-aligned bounding box."""
+    links = range(-1, p.getNumJoints(body, physicsClientId=client))
+    boxes = [p.getAABB(body, link, physicsClientId=client) for link in links]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    centre = 0.5 * (lo + hi)
+    return centre[0], centre[1], 0.5 * math.hypot(hi[0] - lo[0], hi[1] - lo[1])
 
-    Measured on the 2-core dev machine under load from other jobs (load average 3-4.5):
-    0.18-0.29 ms with box obstacles only, 0.45-0.54 ms with four cylinder-wheeled cars,
-    of which ``rayTestBatch`` itself takes 0.3-0.4 ms and the own-body exclusion about
-    0.1 ms. The bound here is loose to avoid flakiness.
-    """
-    car = add_car(client, 0.0, 0.0, 0.0)
-    add_car(client, 1.0, 0.3, 0.5)
-    add_car(client, -0.8, -0.5, 0.0)
-    add_box(client, 0.0, -1.5, 0.0)
+
+def place(client: int, body: int, x: float, y: float, yaw: float) -> None:
+    """Move a body to ``(x, y)`` facing ``yaw``, at its height."""
+    height = p.getBasePositionAndOrientation(body, physicsClientId=client)[0][2]
+    quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
+    p.resetBasePositionAndOrientation(body, [x, y, height], quat, physicsClientId=client)
+
+
+def views(ranges: np.ndarray, lidar: Lidar) -> list[np.ndarray]:
+    """What policies see of a scan: every lidar kind."""
+    angles = lidar.beam_angles
+    return [
+        clip_lidar(ranges),
+        sector_lidar(ranges, angles),
+        discretized_sector_lidar(ranges, angles),
+    ]
+
+
+def test_culled_scans_look_the_same_as_full_scans(client: int) -> None:
+    """Casting only the beams aimed at nearby bodies changes no lidar view, in 300 scenes."""
+    rng = np.random.default_rng(7)
+    own = add_car(client, 0.0, 0.0, 0.0)
+    others = [add_car(client, 0.0, 0.0, 0.0) for _ in range(3)]
+    boxes = [add_box(client, 0.0, 0.0, 0.0, half=(0.08, 0.12, 0.1)) for _ in range(2)]
     lidar = Lidar(client)
-    times = []
-    for _ in range(200):
-        start = time.perf_counter()
-        lidar.scan(0.0, 0.0, 0.0, exclude=[car])
-        times.append(time.perf_counter() - start)
-    assert np.median(times) < 3e-3
+    reach = lidar_reach(SENSOR_NAMES, LidarConfig())
+    hits = culled_beams = 0
+    for _ in range(300):
+        for body in others + boxes:
+            x, y = rng.uniform(-1.8, 1.8, 2)
+            place(client, body, x, y, rng.uniform(-math.pi, math.pi))
+        x, y, yaw = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), rng.uniform(-math.pi, math.pi)
+        place(client, own, x, y, yaw)
+        targets = np.array([covering_circle(client, body) for body in others + boxes])
+        full = lidar.scan(x, y, yaw, exclude=[own])
+        culled = lidar.scan(x, y, yaw, exclude=[own], reach=reach, targets=targets)
+        for seen_full, seen_culled in zip(views(full, lidar), views(culled, lidar), strict=True):
+            assert np.array_equal(seen_full, seen_culled)
+        hits += int((full < LIDAR_CLIP).sum())
+        culled_beams += int((culled == LIDAR_MAX_RANGE).sum())
+    assert hits > 500  # the scenes put bodies within the policy's view
+    assert culled_beams > hits
+
+
+def test_lidar_reach_covers_each_view() -> None:
+    """The reach is the farthest distance any of the car's lidar views distinguishes."""
+    config = LidarConfig(clipping_dist=3.0)
+    assert lidar_reach(("lidar",), config) == pytest.approx(LIDAR_CLIP + 0.1)
+    assert lidar_reach(("sector_lidar",), config) == pytest.approx(0.6)
+    assert lidar_reach(("discretized_sector_lidar",), config) == pytest.approx(3.1)
+    assert lidar_reach(("camera",), config) == LIDAR_MAX_RANGE
+    assert lidar_reach(("discretized_sector_lidar",), LidarConfig(clipping_dist=12.0)) == 12.0
 
 
 def test_clip_lidar() -> None:
