@@ -23,9 +23,14 @@ def _fail(message: str) -> None:
 
 
 def _device(device: str) -> str:
-    """``cuda`` under torchrun becomes ``cuda:LOCAL_RANK``."""
-    if device == "cuda" and "LOCAL_RANK" in os.environ:
-        return f"cuda:{os.environ['LOCAL_RANK']}"
+    """``cuda`` under torchrun becomes ``cuda:LOCAL_RANK``; torchrun needs GPUs."""
+    if int(os.environ.get("WORLD_SIZE", "1")) > 1:
+        if not device.startswith("cuda"):
+            _fail(
+                "torchrun starts one training process per GPU (rsl-rl syncs them with NCCL): "
+                "add --device cuda, or run without torchrun on a CPU"
+            )
+        return f"cuda:{os.environ.get('LOCAL_RANK', '0')}"
     return device
 
 
@@ -120,6 +125,11 @@ def train(
         trainer = Trainer(settings, out, hp, clone=clone, resume=resume)
     except (ValueError, ValidationError, FileNotFoundError) as exc:
         _fail(str(exc))
+    if settings.race_type == "time_trial" and not {"camera", "stereo"} & set(settings.sensors):
+        console.print(
+            "[yellow]warning:[/] the lidar sees only cars and boxes, and a time trial has "
+            "none: a lidar-only car drives blind. Add a camera (--sensors camera,lidar)."
+        )
     total = float(settings.iterations or 60.0 * (settings.minutes or 0.0))
     with Progress(
         TextColumn("[bold]{task.description}"),

@@ -20,6 +20,12 @@ GAE_LAMBDA = 0.95
 # rsl-rl collects a fixed number of steps per slot, not whole episodes: an "episode" of
 # num_episodes_between_training is converted to steps with this estimate.
 STEPS_PER_EPISODE_ESTIMATE = 64
+VALUE_LOSS_COEF = 1.0
+# rsl-rl critic classes -> their Huber-loss variants (agents/huber.py).
+HUBER_CRITICS = {
+    "MLPModel": "agents.huber:HuberMLPModel",
+    "CNNModel": "agents.huber:HuberCNNModel",
+}
 
 
 class Hyperparameters(BaseModel):
@@ -86,12 +92,18 @@ class Hyperparameters(BaseModel):
                 "gamma": self.discount_factor,
                 "lam": GAE_LAMBDA,
                 "entropy_coef": self.beta_entropy,
-                "value_loss_coef": 1.0,
+                "value_loss_coef": VALUE_LOSS_COEF,
                 "use_clipped_value_loss": True,
                 "max_grad_norm": 1.0,
                 "schedule": "fixed",
                 "desired_kl": 0.01,
             },
             "actor": actor,
-            "critic": critic,
+            "critic": self._critic(critic),
         }
+
+    def _critic(self, critic: dict[str, Any]) -> dict[str, Any]:
+        """The critic config, with the Huber-loss variant of its class for ``huber``."""
+        if self.loss_type != "huber":
+            return critic
+        return {**critic, "class_name": HUBER_CRITICS[critic["class_name"]]}

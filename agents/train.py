@@ -68,7 +68,7 @@ class TrainSettings(BaseModel):
     race_type: Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"] = (
         "time_trial"
     )
-    sensors: tuple[str, ...] = ("lidar",)
+    sensors: tuple[str, ...] = ("camera",)
     action_space: ActionSpace
     reward: str = "follow_center_line"
     network: str | None = None

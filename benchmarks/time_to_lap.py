@@ -1,12 +1,14 @@
 """Time to a clean lap: train from scratch until an evaluation drives 3 laps, 0 off-tracks.
 
 Track ``beginner_loop``, follow-centre-line reward, 3 x 3 discrete actions at 1 m/s. For
-each sensor case (``lidar``, ``camera``) it reports the wall-clock minutes to the first
-evaluation (race mode, 3 laps, deterministic policy) with 3 laps and no off-track, the
-best evaluation lap, and two references: the track's physical-limit lap
-(``tracks.raceline``) and the pure-pursuit baseline driving the same action space.
+each sensor case (``camera``, ``camera+lidar`` — DeepRacer's lidar car, whose lidar is
+added to a camera — or ``lidar`` alone, which is blind on an empty track) it reports the
+wall-clock minutes to the first evaluation (race mode, 3 laps, deterministic policy) with
+3 laps and no off-track, the best evaluation lap, and two references: the track's
+physical-limit lap (``tracks.raceline``) and the pure-pursuit baseline driving the same
+action space.
 
-Run: ``.venv/bin/python benchmarks/time_to_lap.py --case lidar --max-minutes 15``
+Run: ``.venv/bin/python benchmarks/time_to_lap.py --case camera+lidar --max-minutes 15``
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from arena.race import run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
 
+CASES = ("camera", "camera+lidar", "lidar")
+DEFAULT_CASES = ("camera", "camera+lidar")
 TRACK = "beginner_loop"
 SPACE = "3x3@1.0"
 # Cheaper updates than DeepRacer's defaults (batch 64, 10 epochs) on a 2-core CPU.
@@ -47,7 +51,7 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
     """Train one sensor case until a clean 3-lap evaluation or the time cap."""
     settings = TrainSettings(
         track=TRACK,
-        sensors=(case,),
+        sensors=tuple(case.split("+")),
         action_space=parse_action_space_spec(SPACE),
         reward="follow_center_line",
         minutes=max_minutes,
@@ -59,7 +63,7 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
         stop_on_clean_eval=True,
     )
     started = time.monotonic()
-    result = Trainer(settings, out / case, HYPERPARAMETERS).run()
+    result = Trainer(settings, out / case.replace("+", "_"), HYPERPARAMETERS).run()
     best = max(result.evaluations, key=lambda e: e["progress"], default=None)
     clean = next((e for e in result.evaluations if e["elapsed_s"] == result.first_clean_eval_s), {})
     return {
@@ -77,12 +81,17 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
 def main() -> None:
     """Parse arguments, run the cases, print the table."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--case", choices=["lidar", "camera", "both"], default="both")
+    parser.add_argument(
+        "--case",
+        action="append",
+        choices=CASES,
+        help=f"sensor case, repeatable (default: {' and '.join(DEFAULT_CASES)})",
+    )
     parser.add_argument("--max-minutes", type=float, default=15.0)
     parser.add_argument("--workers", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("runs/time_to_lap"))
     args = parser.parse_args()
-    cases = ["lidar", "camera"] if args.case == "both" else [args.case]
+    cases = args.case or list(DEFAULT_CASES)
     limit, pursuit = references()
     rows = [train_case(c, args.max_minutes, args.out, args.workers) for c in cases]
     table = Table(title=f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line)")
@@ -102,7 +111,7 @@ def main() -> None:
         "pure pursuit (baseline)", "-", "-", "-", f"{pursuit:.2f}" if pursuit else "-", ""
     )
     table.add_row("physical limit (raceline)", "-", "-", "-", f"{limit:.2f}", "")
-    Console().print(table)
+    Console(width=140).print(table)
 
 
 if __name__ == "__main__":

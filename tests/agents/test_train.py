@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from deepracer.logs import DeepRacerLog
 from typer.testing import CliRunner
 
 import arena
@@ -124,6 +125,7 @@ def test_cli_train_writes_every_output(tmp_path):
     args += ["--eval-every", "1", "--eval-time-limit", "10", "--hyperparameters", str(hp_file)]
     result = cli.invoke(app, args)
     assert result.exit_code == 0, result.output
+    assert "drives blind" in result.output  # lidar alone sees nothing on a time trial
     for name in ("0-iteration.csv", "1-iteration.csv"):
         assert (run / "0" / "training-simtrace" / name).stat().st_size > 0
     metadata = json.loads((run / "model" / "model_metadata.json").read_text())
@@ -135,6 +137,15 @@ def test_cli_train_writes_every_output(tmp_path):
     assert (run / "reward_graph.png").stat().st_size > 0
     assert list((run / "tensorboard").glob("events.out.tfevents.*"))
     assert (run / "checkpoints" / "last.pt").exists()
+    # deepracer-utils, the community's log analysis, reads it as a deepracer-for-cloud run.
+    training = DeepRacerLog(model_folder=str(run))
+    evaluation = DeepRacerLog(model_folder=str(run))
+    training.load_training_trace()
+    evaluation.load_evaluation_trace()
+    traces = list((run / "0" / "training-simtrace").glob("*.csv"))
+    rows = sum(len(trace.read_text().splitlines()) - 1 for trace in traces)
+    assert len(training.dataframe()) == rows and set(training.dataframe()["iteration"]) == {0, 1}
+    assert len(evaluation.dataframe()) > 0
     from arena import make_config
     from arena.race import run_race
     from submissions import load_policy, validate
@@ -157,6 +168,13 @@ def test_cli_train_writes_every_output(tmp_path):
     assert "off" in shown.output and list(run.glob("evaluation-*/replay.gif"))
 
 
+def _train_briefly(tmp_path, reward_fn: str):
+    """``slipstream train`` for one lidar iteration in-process with ``--reward-fn``."""
+    args = ["train", "--out", str(tmp_path / "run"), "--sensors", "lidar"]
+    args += ["--reward-fn", reward_fn, "--iterations", "1", "--workers", "0"]
+    return CliRunner().invoke(app, args)
+
+
 @pytest.mark.parametrize(
     ("source", "message"),
     [
@@ -168,41 +186,20 @@ def test_cli_train_writes_every_output(tmp_path):
 def test_cli_reports_reward_function_errors(tmp_path, source, message):
     reward = Path(tmp_path) / "reward.py"
     reward.write_text(source)
-    result = CliRunner().invoke(
-        app,
-        [
-            "train",
-            "--out",
-            str(tmp_path / "run"),
-            "--sensors",
-            "lidar",
-            "--reward-fn",
-            str(reward),
-            "--iterations",
-            "1",
-            "--workers",
-            "0",
-        ],
-    )
+    result = _train_briefly(tmp_path, str(reward))
     assert result.exit_code == 2
     assert "error" in result.output and message in result.output
 
 
 def test_cli_reports_unknown_sample(tmp_path):
-    result = CliRunner().invoke(
-        app,
-        [
-            "train",
-            "--out",
-            str(tmp_path / "run"),
-            "--sensors",
-            "lidar",
-            "--reward-fn",
-            "no_such_sample",
-            "--iterations",
-            "1",
-            "--workers",
-            "0",
-        ],
-    )
+    result = _train_briefly(tmp_path, "no_such_sample")
     assert result.exit_code == 2 and "no_such_sample" in result.output
+
+
+def test_cli_under_torchrun_without_gpus_says_what_to_do(tmp_path, monkeypatch):
+    monkeypatch.setenv("WORLD_SIZE", "2")
+    monkeypatch.setenv("LOCAL_RANK", "1")
+    args = ["train", "--out", str(tmp_path / "run"), "--iterations", "1", "--workers", "0"]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "--device cuda" in result.output
+    assert not (tmp_path / "run").exists()
