@@ -21,17 +21,14 @@ import subprocess
 import sys
 import tempfile
 import time
-import uuid
 from pathlib import Path
-from urllib.parse import quote
 
 import httpx
-from sqlalchemy import create_engine, text
 
 from arena.config import RaceConfig
 from arena.race import CarResult, RaceResult
 from league import crud
-from league.db import make_engine, make_session_factory
+from league.db import make_engine, make_session_factory, scratch_schema
 from league.migrations import upgrade
 from league.models import Entry, Model
 from league.schemas import EventCreate
@@ -151,21 +148,6 @@ def run_backend(name: str, url: str, args: argparse.Namespace, port: int) -> lis
     return rows
 
 
-def postgres_schema_url(base: str) -> tuple[str, object]:
-    """A fresh schema on ``base`` and a function dropping it."""
-    schema = f"league_bench_{uuid.uuid4().hex[:8]}"
-    admin = create_engine(base, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f'CREATE SCHEMA "{schema}"'))
-    sep = "&" if "?" in base else "?"
-
-    def drop() -> None:
-        with admin.connect() as conn:
-            conn.execute(text(f'DROP SCHEMA "{schema}" CASCADE'))
-
-    return f"{base}{sep}options={quote(f'-csearch_path={schema}')}", drop
-
-
 def main() -> None:
     """Parse options, run the chosen backends, print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -194,7 +176,7 @@ def main() -> None:
         if not args.postgres_url:
             print("postgres skipped: give --postgres-url or set SLIPSTREAM_TEST_POSTGRES_URL")
         else:
-            url, drop = postgres_schema_url(args.postgres_url)
+            url, drop = scratch_schema(args.postgres_url, "league_bench")
             try:
                 rows += run_backend("postgres", url, args, args.port + 1)
             finally:

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import uuid
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
-from sqlalchemy import Engine, create_engine, event, make_url
+from sqlalchemy import Engine, create_engine, event, make_url, text
 from sqlalchemy.orm import Session, sessionmaker
 
 
@@ -52,3 +54,24 @@ def session_scope(factory: sessionmaker[Session]) -> Iterator[Session]:
     """Yield one session and close it afterwards (a FastAPI dependency body)."""
     with factory() as session:
         yield session
+
+
+def scratch_schema(base_url: str, prefix: str) -> tuple[str, Callable[[], None]]:
+    """A fresh PostgreSQL schema on ``base_url`` (for tests and benchmarks).
+
+    Returns a URL whose connections use the schema and a function dropping it; the drop
+    gives up after 30 s instead of waiting forever on locks a stray session holds.
+    """
+    schema = f"{prefix}_{uuid.uuid4().hex[:10]}"
+    admin = create_engine(base_url, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text(f'CREATE SCHEMA "{schema}"'))
+
+    def drop() -> None:
+        with admin.connect() as conn:
+            conn.execute(text("SET lock_timeout = '30s'"))
+            conn.execute(text(f'DROP SCHEMA "{schema}" CASCADE'))
+        admin.dispose()
+
+    sep = "&" if "?" in base_url else "?"
+    return f"{base_url}{sep}options={quote(f'-csearch_path={schema}')}", drop

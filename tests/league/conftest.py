@@ -10,25 +10,22 @@ import os
 import socket
 import threading
 import time
-import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from urllib.parse import quote
 
 import httpx
 import numpy as np
 import pytest
 import uvicorn
 from onnx import TensorProto, helper, numpy_helper
-from sqlalchemy import create_engine, text
 from sqlalchemy.orm import Session, sessionmaker
 
 from arena.actions import default_discrete_space
 from league import crud
 from league.app import create_app
-from league.db import make_engine, make_session_factory
+from league.db import make_engine, make_session_factory, scratch_schema
 from league.migrations import upgrade
 from league.settings import Settings
 from league.storage import Storage
@@ -115,18 +112,7 @@ def _postgres_database() -> Database:
     base = os.environ.get(POSTGRES_ENV)
     if not base:
         pytest.skip(f"PostgreSQL variant skipped: set {POSTGRES_ENV} to run it")
-    schema = f"league_test_{uuid.uuid4().hex[:10]}"
-    admin = create_engine(base, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f'CREATE SCHEMA "{schema}"'))
-    sep = "&" if "?" in base else "?"
-    url = f"{base}{sep}options={quote(f'-csearch_path={schema}')}"
-
-    def drop() -> None:
-        with admin.connect() as conn:
-            conn.execute(text(f'DROP SCHEMA "{schema}" CASCADE'))
-        admin.dispose()
-
+    url, drop = scratch_schema(base, "league_test")
     return Database(url, "postgres", drop)
 
 

@@ -10,17 +10,15 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import quote
 
 import pytest
-from sqlalchemy import Engine, create_engine, text
+from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
-from league.db import make_engine, make_session_factory
+from league.db import make_engine, make_session_factory, scratch_schema
 from league.migrations import upgrade
 from league.settings import Settings
 from league.storage import Storage
@@ -68,31 +66,6 @@ class Ops:
         return path.read_text() if path.exists() else ""
 
 
-def _postgres(base: str) -> tuple[str, object]:
-    schema = f"league_ops_{uuid.uuid4().hex[:10]}"
-    admin = create_engine(base, isolation_level="AUTOCOMMIT")
-    with admin.connect() as conn:
-        conn.execute(text(f'CREATE SCHEMA "{schema}"'))
-    sep = "&" if "?" in base else "?"
-
-    def drop() -> None:
-        with admin.connect() as conn:
-            # Connections a cut proxy left open upstream may still hold locks: end them,
-            # and never wait forever for the drop.
-            conn.execute(
-                text(
-                    "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE "
-                    "datname = current_database() AND pid <> pg_backend_pid() "
-                    "AND state LIKE 'idle in transaction%'"
-                )
-            )
-            conn.execute(text("SET lock_timeout = '30s'"))
-            conn.execute(text(f'DROP SCHEMA "{schema}" CASCADE'))
-        admin.dispose()
-
-    return f"{base}{sep}options={quote(f'-csearch_path={schema}')}", drop
-
-
 @pytest.fixture(params=["sqlite", "postgres"])
 def ops(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Ops]:
     """A migrated, empty database and data directory; started processes are killed after."""
@@ -101,7 +74,7 @@ def ops(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Ops]:
         base = os.environ.get(POSTGRES_ENV)
         if not base:
             pytest.skip(f"PostgreSQL variant skipped: set {POSTGRES_ENV} to run it")
-        url, drop = _postgres(base)
+        url, drop = scratch_schema(base, "league_ops")
     else:
         url = f"sqlite:///{tmp_path / 'league.db'}"
     data_dir = tmp_path / "data"
