@@ -135,13 +135,20 @@ class Proxy:
         threading.Thread(target=self._accept, args=(server,), daemon=True).start()
 
     def stop(self) -> None:
-        """Stop listening and cut every open connection."""
+        """Stop listening and cut every open connection, as a dying proxy would.
+
+        ``shutdown`` before ``close``: closing a socket that a pipe thread is reading
+        neither wakes that thread nor tells the peer, so a client waiting for a reply
+        would wait forever and the server would keep its transaction open.
+        """
         if self.server is not None:
             self.server.close()
             self.server = None
-        for link in self.links:
+        links, self.links = self.links, []
+        for link in links:
+            with contextlib.suppress(OSError):
+                link.shutdown(socket.SHUT_RDWR)
             link.close()
-        self.links.clear()
 
     def _accept(self, server: socket.socket) -> None:
         while True:
