@@ -319,14 +319,9 @@ class Car:
 
     def teleport(self, x: float, y: float, yaw: float) -> None:
         """Place the car origin at (x, y) facing ``yaw`` rad, at rest with wheels straight."""
-        c = self.client
-        com = [x + self._com_ahead * math.cos(yaw), y + self._com_ahead * math.sin(yaw)]
-        quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
-        p.resetBasePositionAndOrientation(
-            self.body_id, [*com, _COM_HEIGHT], quat, physicsClientId=c
-        )
+        self._place_base(x, y, yaw)
         for joint in range(len(_STEER_JOINTS) + len(_WHEEL_JOINTS)):
-            p.resetJointState(self.body_id, joint, 0.0, 0.0, physicsClientId=c)
+            p.resetJointState(self.body_id, joint, 0.0, 0.0, physicsClientId=self.client)
         self.stop()
 
     def hold(self, x: float, y: float, yaw: float) -> None:
@@ -335,13 +330,18 @@ class Car:
         Cheaper than ``teleport`` for a car held in place step after step: only the base
         is reset; the wheels were stopped when it was first placed.
         """
-        c = self.client
+        self._place_base(x, y, yaw)
+        p.resetBaseVelocity(
+            self.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=self.client
+        )
+
+    def _place_base(self, x: float, y: float, yaw: float) -> None:
+        """Put the base so that the car origin is at ``(x, y)``, facing ``yaw``."""
         com = [x + self._com_ahead * math.cos(yaw), y + self._com_ahead * math.sin(yaw)]
         quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
         p.resetBasePositionAndOrientation(
-            self.body_id, [*com, _COM_HEIGHT], quat, physicsClientId=c
+            self.body_id, [*com, _COM_HEIGHT], quat, physicsClientId=self.client
         )
-        p.resetBaseVelocity(self.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
 
     def stop(self) -> None:
         """Zero all velocities in place and hold the wheels still (steering unchanged)."""
