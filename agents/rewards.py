@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from arena.config import RACE_TYPES
 from arena.params import ObjectsView, build_params
 from tracks.catalog import get_track
 from tracks.track import Track
@@ -25,7 +26,6 @@ from tracks.track import Track
 RewardFunction = Callable[[dict[str, Any]], float]
 MAX_ABS_REWARD = 1e5
 SAMPLES_DIR = Path(__file__).parent / "reward_samples"
-RACE_TYPES = ("time_trial", "object_avoidance", "head_to_bot", "head_to_model")
 
 
 class RewardFunctionError(ValueError):

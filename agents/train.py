@@ -37,6 +37,7 @@ from agents.model_metadata import DeepRacerMetadata, write_model_metadata
 from agents.selfplay import OpponentPool
 from agents.vecenv import RacingVecEnv, resolve_reward
 from arena.actions import ActionSpace, DiscreteActionSpace
+from arena.config import RaceType
 from arena.simtrace import write_simtrace
 from tracks.catalog import get_track
 
@@ -65,9 +66,7 @@ class TrainSettings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     track: str = "beginner_loop"
-    race_type: Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"] = (
-        "time_trial"
-    )
+    race_type: RaceType = "time_trial"
     sensors: tuple[str, ...] = ("camera",)
     action_space: ActionSpace
     reward: str = "follow_center_line"

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Literal
+from typing import Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -16,6 +16,8 @@ from arena.actions import ActionSpace, DiscreteActionSpace, default_discrete_spa
 from arena.sensors_spec import LidarConfig, check_sensors
 
 RaceType = Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"]
+"""The four DeepRacer race types; the one place they are listed."""
+RACE_TYPES: tuple[str, ...] = get_args(RaceType)
 Mode = Literal["training", "race"]
 Lane = Literal["inner", "outer"]
 MAX_CARS = 8

@@ -26,6 +26,8 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
+from arena.config import RACE_TYPES
+
 NAMING = {
     "ix": "ix_%(column_0_label)s",
     "uq": "uq_%(table_name)s_%(column_0_name)s",
@@ -35,7 +37,6 @@ NAMING = {
 }
 
 JOB_STATUSES = ("queued", "running", "done", "failed")
-RACE_TYPES = ("time_trial", "object_avoidance", "head_to_bot", "head_to_model")
 RANKING_METRICS = ("total", "best", "average")
 
 

@@ -10,12 +10,11 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
-from arena.config import BotConfig, ObstacleConfig, Penalties
+from arena.config import BotConfig, ObstacleConfig, Penalties, RaceType
 from submissions import Problem
 
 MAX_ID = 2**31 - 1
 Alias = Annotated[str, Field(min_length=2, max_length=32, pattern=r"^[A-Za-z0-9_.\-]+$")]
-RaceType = Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"]
 Metric = Literal["total", "best", "average"]
 
 
