@@ -23,9 +23,9 @@ import torch
 from torch import nn
 
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
-from arena.sensors_spec import LidarConfig, check_sensors, sensor_space
+from arena.sensors_spec import IMAGE_SENSORS, LidarConfig, check_sensors, sensor_space
+from submissions import pack
 
-IMAGE_SENSORS = ("camera", "stereo")
 OPSET = 18
 
 
@@ -117,12 +117,8 @@ def pack_model(
     training_summary: dict[str, Any],
     reward_source: str | None,
     metrics_csv: Path | None,
-) -> Path | None:
-    """Pack ``model.zip`` with ``submissions.pack`` (``None`` if it is not available)."""
-    try:
-        from submissions import pack
-    except ImportError:
-        return None
+) -> Path:
+    """Pack ``model.zip`` with ``submissions.pack``."""
     return pack(
         out_path,
         graph,

@@ -25,9 +25,8 @@ import torch
 from tensordict import TensorDict
 
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
-from arena.sensors_spec import LidarConfig, check_sensors, sensor_space
+from arena.sensors_spec import IMAGE_SENSORS, LidarConfig, check_sensors, sensor_space
 
-IMAGE_SENSORS = ("camera", "stereo")
 CATEGORICAL = "agents.distributions:CategoricalDistribution"
 
 _CNN_LAYERS: dict[str, tuple[list[int], list[int], list[int]]] = {

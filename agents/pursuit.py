@@ -14,13 +14,22 @@ from typing import Any
 import numpy as np
 
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
-from arena.drivers import MAX_STEER_DEG, WHEELBASE, nearest_action
+from arena.car_spec import DEFAULT_CAR, CarSpec
+from arena.drivers import nearest_action, pursuit_steering
 from tracks.raceline import CarLimits, RacingLine, compute_racing_line
 from tracks.track import Track
 
-MODEL_POINT_AHEAD = 0.14
-"""The params' x, y are this far ahead of the rear axle along the heading."""
-DEFAULT_LIMITS = CarLimits()
+
+def car_limits(car: CarSpec = DEFAULT_CAR) -> CarLimits:
+    """The racing-line limits of ``car``: its top speed and width.
+
+    Grip, acceleration and braking keep :class:`CarLimits`' defaults (figures for the
+    line's speed profile, not settings of the simulated car).
+    """
+    return CarLimits(max_speed=car.max_speed, car_width=car.width)
+
+
+DEFAULT_LIMITS = car_limits()
 
 _LINES: dict[tuple[Any, ...], RacingLine] = {}
 
@@ -82,7 +91,8 @@ class PurePursuitPolicy:
         wanted = steer + self._carry
         action = nearest_action(self.space, wanted, self._speed_at_most(speed))
         chosen = self.space.actions[action].steering_angle
-        self._carry = float(np.clip(wanted - chosen, -MAX_STEER_DEG, MAX_STEER_DEG))
+        lock = DEFAULT_CAR.max_steering_deg
+        self._carry = float(np.clip(wanted - chosen, -lock, lock))
         return action
 
     def _speed_at_most(self, speed: float) -> float:
@@ -94,16 +104,10 @@ class PurePursuitPolicy:
     def command(self, x: float, y: float, heading_deg: float, speed: float) -> tuple[float, float]:
         """``(steering_deg, speed)`` for a car whose model point is at ``(x, y)``."""
         yaw = math.radians(heading_deg)
-        rear = np.array(
-            [x - MODEL_POINT_AHEAD * math.cos(yaw), y - MODEL_POINT_AHEAD * math.sin(yaw)]
-        )
+        rear = np.array(DEFAULT_CAR.rear_axle(x, y, yaw))
         distance = self.lookahead + self.lookahead_per_speed * max(speed, 0.0)
         target, target_speed = self._ahead(rear, distance)
-        dx, dy = target[0] - rear[0], target[1] - rear[1]
-        alpha = math.atan2(dy, dx) - yaw
-        chord = max(math.hypot(dx, dy), 1e-6)
-        steer = math.degrees(math.atan2(2.0 * WHEELBASE * math.sin(alpha), chord))
-        steer = float(np.clip(steer, -MAX_STEER_DEG, MAX_STEER_DEG))
+        steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target)
         return steer, float(min(target_speed, self.max_speed))
 
     def _ahead(self, point: np.ndarray, distance: float) -> tuple[np.ndarray, float]:

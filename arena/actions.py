@@ -12,9 +12,12 @@ import numpy as np
 from gymnasium import spaces
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, field_validator, model_validator
 
-MAX_STEERING_DEG = 30.0
-MIN_SPEED = 0.1
-MAX_SPEED = 4.0
+from arena.car_spec import DEFAULT_CAR
+
+# An action can ask for no more than the car can be commanded.
+MAX_STEERING_DEG = DEFAULT_CAR.max_steering_deg
+MIN_SPEED = DEFAULT_CAR.min_speed
+MAX_SPEED = DEFAULT_CAR.max_speed
 MAX_DISCRETE_ACTIONS = 64
 
 

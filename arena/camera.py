@@ -6,6 +6,7 @@ ground hits by the car's yaw and reads them from a :class:`TrackRaster`; other c
 obstacles (:class:`Box3D`) are drawn on top by a per-pixel ray-box test with a depth
 buffer. Faces are lit like PyBullet's TinyRenderer with :data:`LIGHT`, so
 :func:`render_pybullet` (after :func:`add_track_to_pybullet`) gives the same picture.
+The camera itself (size, field of view, mounting) is :class:`arena.sensors_spec.CameraSpec`.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import imageio.v3 as iio
 import numpy as np
 import pybullet as p
 
-from arena.sensors_spec import CAMERA_HEIGHT, CAMERA_WIDTH
+from arena.sensors_spec import DEFAULT_CAMERA, CameraSpec
 from tracks.track import Track
 
 GRASS_GRAY = 96
@@ -62,35 +63,6 @@ class Lighting:
 
 LIGHT = Lighting()
 _BOX_CORNERS = np.array([(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0.0, 1.0)])
-
-
-@dataclass(frozen=True)
-class CameraSpec:
-    """Intrinsics and mounting of one camera (stereo: two, ``stereo_baseline`` apart).
-
-    Mount offsets are from the car origin (on the ground, at the car's reference point),
-    in the car frame; ``near``/``far`` bound what is drawn (the horizon is ``far`` away).
-    """
-
-    width: int = CAMERA_WIDTH
-    height: int = CAMERA_HEIGHT
-    hfov_deg: float = 64.7
-    pitch_down_deg: float = 15.0
-    mount_forward: float = 0.09
-    mount_height: float = 0.12
-    stereo_baseline: float = 0.06
-    near: float = 0.01
-    far: float = 30.0
-
-    @property
-    def focal(self) -> float:
-        """Focal length in pixels (square pixels)."""
-        return 0.5 * self.width / math.tan(math.radians(0.5 * self.hfov_deg))
-
-    @property
-    def vfov_deg(self) -> float:
-        """Vertical field of view in degrees."""
-        return math.degrees(2.0 * math.atan(0.5 * self.height / self.focal))
 
 
 @dataclass(frozen=True)
@@ -248,7 +220,7 @@ class CameraRenderer:
     def __init__(
         self,
         track: Track,
-        spec: CameraSpec = CameraSpec(),
+        spec: CameraSpec = DEFAULT_CAMERA,
         raster: TrackRaster | None = None,
         lighting: Lighting = LIGHT,
     ) -> None:

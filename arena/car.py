@@ -1,5 +1,8 @@
 """The 1/18 scale car: a PyBullet multibody built in code (no URDF).
 
+Its dimensions and limits come from :class:`arena.car_spec.CarSpec`; the figures below
+are that spec's defaults.
+
 Frames and geometry
 -------------------
 * The **car origin** is the centre of the rear axle on the ground. ``CarState`` x, y,
@@ -59,6 +62,8 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
+from arena.car_spec import DEFAULT_CAR, CarSpec
+
 # Collision groups (bits above PyBullet's defaults 1 and 2, which other bodies keep).
 GROUND_GROUP = 1 << 4
 CAR_GROUP = 1 << 5  # chassis
@@ -79,28 +84,6 @@ _WHEEL_COLOR = (0.1, 0.1, 0.1, 1.0)
 _FL_STEER, _FL_WHEEL, _FR_STEER, _FR_WHEEL, _RL_WHEEL, _RR_WHEEL = range(6)
 _STEER_JOINTS = [_FL_STEER, _FR_STEER]
 _WHEEL_JOINTS = [_FL_WHEEL, _FR_WHEEL, _RL_WHEEL, _RR_WHEEL]
-
-
-@dataclass(frozen=True)
-class CarSpec:
-    """Dimensions (m), masses (kg), friction and motor limits of one car."""
-
-    wheelbase: float = 0.164
-    track: float = 0.16
-    wheel_radius: float = 0.035
-    chassis_mass: float = 5.0
-    wheel_friction: float = 0.5
-    length: float = 0.3235
-    width: float = 0.196
-    height: float = 0.16  # chassis collision box, from 0.02 m to 0.18 m above the ground
-    model_point_ahead: float = 0.14
-    max_steering_deg: float = 30.0
-    min_speed: float = 0.1
-    max_speed: float = 4.0
-    wheel_mass: float = 0.3
-    wheel_torque: float = 0.15  # N m, per wheel velocity motor
-    steering_torque: float = 2.0  # N m, per steering position motor
-    steering_gain: float = 0.3  # position-motor gain of the steering knuckles
 
 
 @dataclass(frozen=True)
@@ -146,7 +129,7 @@ class Car:
     def __init__(
         self,
         client: int,
-        spec: CarSpec = CarSpec(),
+        spec: CarSpec = DEFAULT_CAR,
         x: float = 0.0,
         y: float = 0.0,
         yaw: float = 0.0,
@@ -155,7 +138,7 @@ class Car:
         self.client = client
         self.spec = spec
         # The base frame is the chassis centre of mass, mid-wheelbase.
-        self._com_ahead = spec.wheelbase / 2.0
+        self._com_ahead = spec.centre_ahead
         half_wb, half_tr = spec.wheelbase / 2.0, spec.track / 2.0
         self._wheel_offsets = np.array(
             [[half_wb, half_tr], [half_wb, -half_tr], [-half_wb, half_tr], [-half_wb, -half_tr]]

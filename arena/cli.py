@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from arena.config import ConfigError
+from arena.config import ConfigError, resolve_track
 
 DRIVERS = ("bot", "random")
 
@@ -58,7 +58,6 @@ def race_command(
 
     from arena import make_config
     from arena.drivers import LaneFollowerPolicy
-    from arena.env import resolve_track
     from arena.race import run_race
     from arena.replay import ReplayWriter
 

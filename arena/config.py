@@ -12,8 +12,16 @@ from typing import Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from arena.actions import ActionSpace, DiscreteActionSpace, default_discrete_space
+from arena.actions import (
+    MAX_SPEED,
+    MIN_SPEED,
+    ActionSpace,
+    DiscreteActionSpace,
+    default_discrete_space,
+)
 from arena.sensors_spec import LidarConfig, check_sensors
+from tracks.catalog import get_track
+from tracks.track import Track, TrackError
 
 RaceType = Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"]
 """The four DeepRacer race types; the one place they are listed."""
@@ -76,7 +84,7 @@ class BotConfig(_Frozen):
     """Bot cars for head-to-bot races: lane followers that change lanes now and then."""
 
     count: int = Field(default=3, ge=1, le=6)
-    speed: float = Field(default=0.8, ge=0.1, le=4.0)
+    speed: float = Field(default=0.8, ge=MIN_SPEED, le=MAX_SPEED)
     lane_change_min_s: float = Field(default=1.0, gt=0.0)
     lane_change_max_s: float = Field(default=5.0, gt=0.0)
     min_gap_m: float = Field(default=2.0, gt=0.0)
@@ -178,6 +186,18 @@ class RaceConfig(_Frozen):
         return 1.0 / self.physics.control_hz
 
 
+def resolve_track(config: RaceConfig) -> tuple[Track, bool]:
+    """The config's track in its race direction, and whether that reverses the file.
+
+    An unknown or unreadable track is a :class:`ConfigError`.
+    """
+    try:
+        native = get_track(config.track)
+    except TrackError as exc:
+        raise ConfigError(f"invalid race config: track: {exc}") from None
+    return native.with_direction(config.direction), native.direction != config.direction
+
+
 def describe_validation_error(exc: ValidationError) -> str:
     """One readable line per problem: ``field.path: message``."""
     lines = []
@@ -204,4 +224,5 @@ __all__ = [
     "Penalties",
     "PhysicsConfig",
     "RaceConfig",
+    "resolve_track",
 ]

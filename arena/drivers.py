@@ -12,11 +12,19 @@ from typing import Any
 
 import numpy as np
 
-from arena.actions import ContinuousActionSpace, DiscreteActionSpace
+from arena.actions import MAX_SPEED, MAX_STEERING_DEG, ContinuousActionSpace, DiscreteActionSpace
+from arena.car_spec import DEFAULT_CAR, CarSpec
 from tracks.track import Track
 
-WHEELBASE = 0.164
-MAX_STEER_DEG = 30.0
+
+def pursuit_steering(car: CarSpec, x: float, y: float, yaw: float, target: np.ndarray) -> float:
+    """Pure-pursuit steering (deg, within the car's lock) from the rear axle at ``(x, y)``,
+    heading ``yaw``, onto the arc through ``target`` ``(2,)``."""
+    dx, dy = target[0] - x, target[1] - y
+    alpha = math.atan2(dy, dx) - yaw
+    chord = max(math.hypot(dx, dy), 1e-6)
+    steer = math.degrees(math.atan2(2.0 * car.wheelbase * math.sin(alpha), chord))
+    return float(np.clip(steer, -car.max_steering_deg, car.max_steering_deg))
 
 
 class LaneFollower:
@@ -27,25 +35,28 @@ class LaneFollower:
         speed: target speed, m/s.
         lookahead: pursuit distance along the track, metres.
         lane: 'center', 'inner', 'outer' or a lateral offset in metres (left positive).
+        car: the car it steers.
     """
 
     def __init__(
-        self, track: Track, speed: float, lookahead: float = 0.6, lane: str | float = "center"
+        self,
+        track: Track,
+        speed: float,
+        lookahead: float = 0.6,
+        lane: str | float = "center",
+        car: CarSpec = DEFAULT_CAR,
     ) -> None:
         self.track = track
         self.speed = speed
         self.lookahead = lookahead
         self.lane = lane
+        self.car = car
 
     def command(self, x: float, y: float, yaw: float) -> tuple[float, float]:
         """``(steering_deg, speed)`` towards the lane point ``lookahead`` metres ahead."""
         arc = float(self.track.project(np.array([[x, y]])).arc_length[0])
         target, _ = self.track.pose_at(np.array([arc + self.lookahead]), self.lane)
-        dx, dy = target[0, 0] - x, target[0, 1] - y
-        alpha = math.atan2(dy, dx) - yaw
-        dist = max(math.hypot(dx, dy), 1e-6)
-        steer = math.degrees(math.atan2(2.0 * WHEELBASE * math.sin(alpha), dist))
-        return float(np.clip(steer, -MAX_STEER_DEG, MAX_STEER_DEG)), self.speed
+        return pursuit_steering(self.car, x, y, yaw, target[0]), self.speed
 
 
 def nearest_action(
@@ -54,7 +65,8 @@ def nearest_action(
     """The action of ``space`` closest to the command ``(steer, speed)``."""
     if isinstance(space, DiscreteActionSpace):
         costs = [
-            ((a.steering_angle - steer) / 30.0) ** 2 + ((a.speed - speed) / 4.0) ** 2
+            ((a.steering_angle - steer) / MAX_STEERING_DEG) ** 2
+            + ((a.speed - speed) / MAX_SPEED) ** 2
             for a in space.actions
         ]
         return int(np.argmin(costs))
@@ -86,8 +98,7 @@ class LaneFollowerPolicy:
         if params is None:
             raise ValueError("LaneFollowerPolicy needs the race params")
         yaw = math.radians(params["heading"])
-        # params give the model point; pursue from the rear axle, 0.14 m behind it.
-        x = params["x"] - 0.14 * math.cos(yaw)
-        y = params["y"] - 0.14 * math.sin(yaw)
+        # params give the model point; pursue from the rear axle behind it.
+        x, y = self.follower.car.rear_axle(params["x"], params["y"], yaw)
         steer, speed = self.follower.command(x, y, yaw)
         return nearest_action(self.space, steer, speed)

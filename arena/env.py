@@ -21,8 +21,9 @@ from pettingzoo import ParallelEnv
 
 from arena import world
 from arena.camera import Box3D, CameraRenderer
-from arena.car import Car, CarSnapshot, CarSpec
-from arena.config import ConfigError, RaceConfig
+from arena.car import Car, CarSnapshot
+from arena.car_spec import DEFAULT_CAR
+from arena.config import ConfigError, RaceConfig, resolve_track
 from arena.drivers import LaneFollower
 from arena.lidar import (
     Lidar,
@@ -34,10 +35,17 @@ from arena.lidar import (
 from arena.params import ObjectsView, build_params, check_reward
 from arena.rewards import follow_center_line
 from arena.rules import CarRecord, EpisodeStatus, Measurement, RuleBook
-from arena.sensors_spec import observation_space
-from arena.spawn import Placement, bot_places, car_grid, obstacle_places, respawn_place, start_arc
-from tracks.catalog import get_track
-from tracks.track import Projection, Track, TrackError
+from arena.sensors_spec import IMAGE_SENSORS, observation_space
+from arena.spawn import (
+    Placement,
+    bot_places,
+    car_grid,
+    obstacle_places,
+    other_lane,
+    respawn_place,
+    start_arc,
+)
+from tracks.track import Projection
 
 RewardFunction = Callable[[dict[str, Any]], float]
 CAR_COLORS = [
@@ -96,18 +104,6 @@ class _Live:
     parked: bool = False
 
 
-def resolve_track(config: RaceConfig) -> tuple[Track, bool]:
-    """The config's track in its race direction, and whether that reverses the file.
-
-    An unknown or unreadable track is a :class:`ConfigError`.
-    """
-    try:
-        native = get_track(config.track)
-    except TrackError as exc:
-        raise ConfigError(f"invalid race config: track: {exc}") from None
-    return native.with_direction(config.direction), native.direction != config.direction
-
-
 class RacingEnv(ParallelEnv):
     """DeepRacer-style racing for 1-8 controlled cars (PettingZoo parallel API).
 
@@ -154,15 +150,14 @@ class RacingEnv(ParallelEnv):
             control_hz=config.physics.control_hz, physics_hz=config.physics.physics_hz
         )
         self._rules = RuleBook(
-            track_length=self.track.length,
-            is_loop=self.track.is_loop,
+            track=self.track,
             mode=config.mode,
             laps=config.laps,
             penalties=config.penalties,
             max_resets=config.max_resets,
             time_limit_s=config.time_limit_s,
         )
-        self._needs_camera = any(s in ("camera", "stereo") for c in config.cars for s in c.sensors)
+        self._needs_camera = any(s in IMAGE_SENSORS for c in config.cars for s in c.sensors)
         self._camera = CameraRenderer(self.track) if self._needs_camera else None
         self._waypoints = [tuple(map(float, w)) for w in self.track.waypoints]
         self._check_fits()
@@ -234,14 +229,14 @@ class RacingEnv(ParallelEnv):
         if self.config.bots is not None:
             bots = self.config.bots
             for place, lane in bot_places(bots.count, bots.min_gap_m, self.track, arc0):
-                car = Car(client, CarSpec(), place.x, place.y, place.yaw, color=BOT_COLOR)
+                car = Car(client, DEFAULT_CAR, place.x, place.y, place.yaw, color=BOT_COLOR)
                 driver = LaneFollower(self.track, bots.speed, lane=lane)
                 self._bots.append(_Bot(car, driver, self._next_lane_change()))
         self._cars: dict[str, _Live] = {}
         for i, (agent, place) in enumerate(
             zip(self.possible_agents, car_grid(self.config, self.track, arc0), strict=True)
         ):
-            car = Car(client, CarSpec(), place.x, place.y, place.yaw, color=CAR_COLORS[i])
+            car = Car(client, DEFAULT_CAR, place.x, place.y, place.yaw, color=CAR_COLORS[i])
             point = car.model_point()
             record = self._rules.start(self._arc_of(point), 0.0)
             self._cars[agent] = _Live(car, record, last_point=point)
@@ -300,7 +295,7 @@ class RacingEnv(ParallelEnv):
     def _drive_bots(self) -> None:
         for bot in self._bots:
             if self.time >= bot.next_change:
-                bot.driver.lane = "outer" if bot.driver.lane == "inner" else "inner"
+                bot.driver.lane = other_lane(bot.driver.lane)
                 bot.next_change = self._next_lane_change()
             state = self._snap(bot.car).state
             bot.car.apply_command(*bot.driver.command(state.x, state.y, state.yaw))
@@ -391,11 +386,7 @@ class RacingEnv(ParallelEnv):
         return at_fault
 
     def _is_behind(self, arc: float, other_arc: float) -> bool:
-        gap = other_arc - arc
-        if self.track.is_loop:
-            half = 0.5 * self.track.length
-            gap = (gap + half) % self.track.length - half
-        return gap > 0
+        return self.track.arc_delta(arc, other_arc) > 0
 
     def _respawn(
         self, live: _Live, status: EpisodeStatus, offset: float, obstacle: int | None
@@ -472,7 +463,6 @@ class RacingEnv(ParallelEnv):
             headings.append(math.degrees(o.place.yaw))
             speeds.append(0.0)
             boxes.append(Box3D(o.place.x, o.place.y, o.place.yaw, *o.size, gray=BOX_GRAY))
-        spec = CarSpec()
         movers = [(None, b.car, BOT_GRAY) for b in self._bots] + [
             (a, self._cars[a].car, CAR_GRAY)
             for a in self.possible_agents
@@ -486,6 +476,7 @@ class RacingEnv(ParallelEnv):
             headings.append(math.degrees(state.yaw))
             speeds.append(abs(state.speed))
             cx, cy = snap.centre
+            spec = car.spec
             boxes.append(Box3D(cx, cy, state.yaw, spec.length, spec.width, spec.height, gray))
         loc = np.array(locations, dtype=float).reshape(-1, 2)
         heading = (np.array(headings) + 180.0) % 360.0 - 180.0
@@ -601,6 +592,8 @@ class RacingEnv(ParallelEnv):
             "crash_count": rec.crash_count,
             "reset_count": rec.reset_count,
             "penalty_seconds": rec.penalty_seconds,
+            "pause_left": rec.frozen_until - self.time if rec.frozen_until is not None else 0.0,
+            "done": rec.done,
             "progress": self._rules.progress(rec),
             "time": self.time,
         }

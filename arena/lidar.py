@@ -20,14 +20,16 @@ from arena.sensors_spec import (
     LIDAR_FOV_DEG,
     LIDAR_MAX_RANGE,
     LIDAR_MIN_RANGE,
+    LIDAR_MOUNT_FORWARD,
+    LIDAR_MOUNT_HEIGHT,
     LIDAR_NOISE_STD,
     SECTOR_THRESHOLD,
     LidarConfig,
 )
 
-LIDAR_MOUNT_FORWARD = 0.0
-LIDAR_MOUNT_HEIGHT = 0.07
 _CLEARANCE = 1e-4
+# The sector views default to DeepRacer's default ``lidar_config``.
+_DEFAULT_VIEW = LidarConfig()
 # Beyond what a lidar view distinguishes, a hit still matters if noise could pull it back
 # in; ten standard deviations make that a 1e-23 event.
 _NOISE_MARGIN = 10.0 * LIDAR_NOISE_STD
@@ -359,7 +361,7 @@ def _sector_minima(ranges: np.ndarray, beam_angles: np.ndarray, num_sectors: int
 def sector_lidar(
     ranges: np.ndarray,
     beam_angles: np.ndarray,
-    num_sectors: int = 8,
+    num_sectors: int = _DEFAULT_VIEW.num_sectors,
     threshold: float = SECTOR_THRESHOLD,
 ) -> np.ndarray:
     """DeepRacer's SECTOR_LIDAR: ``(num_sectors,)`` float32, 1 where something is nearer than
@@ -371,9 +373,9 @@ def sector_lidar(
 def discretized_sector_lidar(
     ranges: np.ndarray,
     beam_angles: np.ndarray,
-    num_sectors: int = 8,
-    num_values: int = 8,
-    clip: float = 2.0,
+    num_sectors: int = _DEFAULT_VIEW.num_sectors,
+    num_values: int = _DEFAULT_VIEW.num_values_per_sector,
+    clip: float = _DEFAULT_VIEW.clipping_dist,
 ) -> np.ndarray:
     """DeepRacer's DISCRETIZED_SECTOR_LIDAR: ``(num_sectors * num_values,)`` float32.
 

@@ -13,9 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from arena.sensors_spec import DEFAULT_CAMERA
 from tracks.track import Projection, Track
 
-CAMERA_HALF_FOV_DEG = 64.7 / 2.0
+CAMERA_HALF_FOV_DEG = 0.5 * DEFAULT_CAMERA.hfov_deg
 CAMERA_RANGE_M = 6.0
 
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from arena.car_spec import DEFAULT_CAR, CarSpec
 from tracks.track import Track
 
 GRASS = np.array([70, 125, 70], dtype=np.uint8)
@@ -14,13 +15,16 @@ BORDER = np.array([235, 235, 235], dtype=np.uint8)
 CENTER = np.array([220, 190, 60], dtype=np.uint8)
 BOX = np.array([230, 150, 30], dtype=np.uint8)
 BOT = np.array([25, 25, 25], dtype=np.uint8)
-CAR_LENGTH, CAR_WIDTH = 0.3235, 0.196
 
 
 class TopDownRenderer:
-    """Draws frames of ``width`` pixels (height follows the track's aspect ratio)."""
+    """Draws frames of ``width`` pixels (height follows the track's aspect ratio); cars
+    (and bots) are drawn with the footprint of ``car``."""
 
-    def __init__(self, track: Track, width: int = 640, margin: float = 0.5) -> None:
+    def __init__(
+        self, track: Track, width: int = 640, margin: float = 0.5, car: CarSpec = DEFAULT_CAR
+    ) -> None:
+        self.car = car
         xmin, ymin, xmax, ymax = track.bounds
         self.origin = np.array([xmin - margin, ymax + margin])
         self.scale = width / (xmax - xmin + 2 * margin)
@@ -102,6 +106,15 @@ class TopDownRenderer:
         inside = (np.abs(along) <= length / 2) & (np.abs(across) <= width / 2)
         image[r0:r1, c0:c1][inside] = color
 
+    def _fill_car(
+        self, image: np.ndarray, x: float, y: float, yaw: float, color: np.ndarray
+    ) -> tuple[float, float]:
+        """Fill the footprint of a car whose origin is at ``(x, y)``; returns its centre."""
+        ahead = self.car.centre_ahead
+        cx, cy = x + ahead * math.cos(yaw), y + ahead * math.sin(yaw)
+        self._fill_box(image, cx, cy, yaw, self.car.length, self.car.width, color)
+        return cx, cy
+
     def frame(
         self,
         cars: list[tuple[tuple[float, float, float, float], tuple[float, ...]]],
@@ -114,12 +127,10 @@ class TopDownRenderer:
         for x, y, yaw, length, width in obstacles:
             self._fill_box(image, x, y, yaw, length, width, BOX)
         for x, y, yaw in bots:
-            cx, cy = x + 0.082 * math.cos(yaw), y + 0.082 * math.sin(yaw)
-            self._fill_box(image, cx, cy, yaw, CAR_LENGTH, CAR_WIDTH, BOT)
+            self._fill_car(image, x, y, yaw, BOT)
         for (x, y, yaw, _), rgba in cars:
             color = (np.array(rgba[:3]) * 255).astype(np.uint8)
-            cx, cy = x + 0.082 * math.cos(yaw), y + 0.082 * math.sin(yaw)
-            self._fill_box(image, cx, cy, yaw, CAR_LENGTH, CAR_WIDTH, color)
+            cx, cy = self._fill_car(image, x, y, yaw, color)
             nose = (cx + 0.13 * math.cos(yaw), cy + 0.13 * math.sin(yaw))
             self._fill_box(image, *nose, yaw, 0.06, 0.08, BORDER)
         return image

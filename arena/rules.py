@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from arena.config import Mode, Penalties
+from tracks.track import Track
 
 EpisodeStatus = Literal[
     "prepare",
@@ -77,20 +78,18 @@ class Measurement:
 
 
 class RuleBook:
-    """Applies the episode rules for one race or training episode."""
+    """Applies the episode rules for one race or training episode on ``track``."""
 
     def __init__(
         self,
-        track_length: float,
-        is_loop: bool,
+        track: Track,
         mode: Mode,
         laps: int,
         penalties: Penalties,
         max_resets: int | None,
         time_limit_s: float,
     ) -> None:
-        self.track_length = track_length
-        self.is_loop = is_loop
+        self.track = track
         self.mode = mode
         self.laps = laps if mode == "race" else 1
         self.penalties = penalties
@@ -105,14 +104,11 @@ class RuleBook:
 
     def progress(self, rec: CarRecord) -> float:
         """Percent of the current lap done, 0 to 100."""
-        pct = 100.0 * (rec.distance - rec.lap_start_distance) / self.track_length
+        pct = 100.0 * (rec.distance - rec.lap_start_distance) / self.track.length
         return min(max(pct, 0.0), 100.0)
 
     def _advance(self, rec: CarRecord, arc: float) -> float:
-        delta = arc - rec.last_arc
-        if self.is_loop:
-            half = 0.5 * self.track_length
-            delta = (delta + half) % self.track_length - half
+        delta = self.track.arc_delta(rec.last_arc, arc)
         rec.last_arc = arc
         rec.distance += delta
         return delta
@@ -129,7 +125,7 @@ class RuleBook:
         rec.immobile_steps = rec.immobile_steps + 1 if m.moved <= IMMOBILE_METRES else 0
         rec.reversing_steps = rec.reversing_steps + 1 if delta < -1e-6 else 0
 
-        if rec.distance - rec.lap_start_distance >= self.track_length:
+        if rec.distance - rec.lap_start_distance >= self.track.length:
             self._complete_lap(rec, now)
             if rec.done:
                 return rec.status
@@ -150,7 +146,7 @@ class RuleBook:
     def _complete_lap(self, rec: CarRecord, now: float) -> None:
         rec.lap_times.append(now - rec.lap_start_time)
         rec.lap_start_time = now
-        rec.lap_start_distance += self.track_length
+        rec.lap_start_distance += self.track.length
         rec.status = "lap_complete"
         if rec.laps >= self.laps:
             rec.done = rec.finished = True

@@ -1,21 +1,24 @@
-"""Names, shapes and DeepRacer spellings of the sensors a car can carry."""
+"""The sensors a car can carry: names, DeepRacer spellings, shapes and their numbers.
+
+Every figure of a sensor (camera intrinsics and mounting, lidar beams, ranges, noise and
+mounting) is written here once; :mod:`arena.camera`, :mod:`arena.lidar` and
+:mod:`arena.params` read it from here.
+"""
 
 from __future__ import annotations
 
-from typing import Literal
+import math
+from dataclasses import dataclass
+from typing import Literal, get_args
 
 import numpy as np
 from gymnasium import spaces
 from pydantic import BaseModel, ConfigDict, Field
 
 SensorName = Literal["camera", "stereo", "lidar", "sector_lidar", "discretized_sector_lidar"]
-SENSOR_NAMES: tuple[str, ...] = (
-    "camera",
-    "stereo",
-    "lidar",
-    "sector_lidar",
-    "discretized_sector_lidar",
-)
+SENSOR_NAMES: tuple[str, ...] = get_args(SensorName)
+IMAGE_SENSORS: tuple[str, ...] = ("camera", "stereo")
+"""The sensors that see the road (a lidar sees cars and boxes only)."""
 DEEPRACER_SENSOR = {
     "camera": "FRONT_FACING_CAMERA",
     "stereo": "STEREO_CAMERAS",
@@ -33,7 +36,42 @@ LIDAR_MIN_RANGE = 0.15
 LIDAR_MAX_RANGE = 12.0
 LIDAR_CLIP = 1.0
 LIDAR_NOISE_STD = 0.01
+LIDAR_MOUNT_FORWARD = 0.0
+LIDAR_MOUNT_HEIGHT = 0.07
 SECTOR_THRESHOLD = 0.5
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """Intrinsics and mounting of one camera (stereo: two, ``stereo_baseline`` apart).
+
+    Mount offsets are from the car origin (on the ground, at the car's reference point),
+    in the car frame; ``near``/``far`` bound what is drawn (the horizon is ``far`` away).
+    """
+
+    width: int = CAMERA_WIDTH
+    height: int = CAMERA_HEIGHT
+    hfov_deg: float = 64.7
+    pitch_down_deg: float = 15.0
+    mount_forward: float = 0.09
+    mount_height: float = 0.12
+    stereo_baseline: float = 0.06
+    near: float = 0.01
+    far: float = 30.0
+
+    @property
+    def focal(self) -> float:
+        """Focal length in pixels (square pixels)."""
+        return 0.5 * self.width / math.tan(math.radians(0.5 * self.hfov_deg))
+
+    @property
+    def vfov_deg(self) -> float:
+        """Vertical field of view in degrees."""
+        return math.degrees(2.0 * math.atan(0.5 * self.height / self.focal))
+
+
+DEFAULT_CAMERA = CameraSpec()
+"""The front camera every car carries (each of the two, for stereo)."""
 
 
 class LidarConfig(BaseModel):

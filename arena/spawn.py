@@ -76,7 +76,7 @@ def obstacle_places(
     cuts = np.sort(rng.uniform(0.0, slack, size=config.count))
     arcs = START_CLEAR_M + cuts + config.min_gap_m * np.arange(config.count)
     first_lane = ("inner", "outer")[int(rng.integers(2))]
-    lanes = [first_lane if i % 2 == 0 else _other(first_lane) for i in range(config.count)]
+    lanes = [first_lane if i % 2 == 0 else other_lane(first_lane) for i in range(config.count)]
     return [(place(track, arc0 + a, lane), lane) for a, lane in zip(arcs, lanes, strict=True)]
 
 
@@ -94,7 +94,8 @@ def bot_places(
     return [(place(track, arc0 + (j + 1) * spacing, lanes[j]), lanes[j]) for j in range(count)]
 
 
-def _other(lane: str) -> str:
+def other_lane(lane: str) -> str:
+    """The lane across: ``outer`` for ``inner``, ``inner`` for anything else."""
     return "outer" if lane == "inner" else "inner"
 
 
@@ -105,7 +106,7 @@ def respawn_place(
     its last arc length, or 1 m behind the obstacle it hit, in the other lane."""
     if obstacle is not None:
         obstacle_arc, obstacle_lane = obstacle
-        return place(track, obstacle_arc - RESPAWN_BEHIND_OBSTACLE_M, _other(obstacle_lane))
+        return place(track, obstacle_arc - RESPAWN_BEHIND_OBSTACLE_M, other_lane(obstacle_lane))
     arr = np.array([arc])
     inner = float(track.lane_offset(arr, "inner")[0])
     outer = float(track.lane_offset(arr, "outer")[0])

@@ -265,6 +265,19 @@ class Track:
         s = np.asarray(s, dtype=float)
         return np.mod(s, self.length) if self.is_loop else np.clip(s, 0.0, self.length)
 
+    def arc_delta(self, start: np.ndarray | float, end: np.ndarray | float) -> np.ndarray | float:
+        """Signed arc length from ``start`` to ``end`` (positive: ``end`` is ahead).
+
+        On a loop the gap is taken the short way round, across the start line if need
+        be, in ``[-length / 2, length / 2)``; on an open track it is ``end - start``.
+        Vectorised: arrays broadcast and give an array; two scalars give a float.
+        """
+        delta = np.subtract(end, start, dtype=float)
+        if self.is_loop:
+            half = 0.5 * self.length
+            delta = np.mod(delta + half, self.length) - half
+        return float(delta) if delta.ndim == 0 else delta
+
     def _locate(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         s = self.wrap_arc_length(s)
         seg = np.clip(np.searchsorted(self._cum, s, side="right") - 1, 0, len(self._cum) - 2)

@@ -9,10 +9,11 @@ import pytest
 
 import arena
 from agents.action_spaces import continuous_action_space, parse_action_space_spec
-from agents.pursuit import MODEL_POINT_AHEAD, PurePursuitPolicy, racing_line_for
+from agents.pursuit import DEFAULT_LIMITS, PurePursuitPolicy, car_limits, racing_line_for
+from arena.car_spec import DEFAULT_CAR, CarSpec
 from arena.race import run_race
 from tracks.catalog import get_track
-from tracks.raceline import compute_racing_line
+from tracks.raceline import CarLimits, compute_racing_line
 
 TRACK = "beginner_loop"
 
@@ -49,7 +50,7 @@ def test_steers_towards_the_line_from_the_rear_axle() -> None:
     tangent = line.points[11] - line.points[10]
     heading = math.degrees(math.atan2(tangent[1], tangent[0]))
     yaw = math.radians(heading)
-    model = rear + MODEL_POINT_AHEAD * np.array([math.cos(yaw), math.sin(yaw)])
+    model = rear + DEFAULT_CAR.model_point_ahead * np.array([math.cos(yaw), math.sin(yaw)])
     steer, speed = policy.command(model[0], model[1], heading, 2.0)
     normal = np.array([-math.sin(yaw), math.cos(yaw)])
     left_steer, _ = policy.command(*(model - 0.2 * normal), heading, 2.0)
@@ -72,3 +73,12 @@ def test_needs_params() -> None:
     assert PurePursuitPolicy.needs_params
     with pytest.raises(ValueError, match="params"):
         policy.act({})
+
+
+def test_racing_line_limits_are_the_cars() -> None:
+    # tracks cannot import the arena: its CarLimits defaults must stay the arena car's.
+    assert car_limits() == CarLimits() == DEFAULT_LIMITS
+    wide_and_slow = car_limits(CarSpec(max_speed=2.5, width=0.3))
+    assert (wide_and_slow.max_speed, wide_and_slow.car_width) == (2.5, 0.3)
+    policy = PurePursuitPolicy(get_track(TRACK), continuous_action_space())
+    assert policy.line.limits == car_limits()

@@ -1,9 +1,11 @@
-"""The fast camera renderer: raster contents, geometry, PyBullet agreement, speed."""
+"""The fast camera renderer: raster contents, geometry, PyBullet agreement.
+
+Its speed is measured by ``benchmarks/camera_frame.py``, not here.
+"""
 
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +21,12 @@ from arena.camera import (
     SKY_GRAY,
     Box3D,
     CameraRenderer,
-    CameraSpec,
     TrackRaster,
     add_box_to_pybullet,
     add_track_to_pybullet,
     render_pybullet,
 )
+from arena.sensors_spec import CameraSpec
 from tracks.io import read_track
 from tracks.track import Track
 
@@ -179,21 +181,10 @@ def test_fast_renderer_matches_pybullet_on_reinvent_base() -> None:
     assert within >= 0.995
 
 
-def test_render_speed(renderer: CameraRenderer, track: Track) -> None:
-    """Frame time with two boxes in view (median of 50 frames).
-
-    Measured on the 2-core dev machine under load from other jobs: about 0.4 ms mono and
-    0.8 ms stereo (0.1 ms mono without boxes). The bound here is loose so the test is
-    not flaky on busy machines.
-    """
+def test_boxes_in_view_change_the_frame(renderer: CameraRenderer, track: Track) -> None:
+    """The scene ``benchmarks/camera_frame.py`` times: two boxes ahead show in the frame."""
     s = 1.0
     (x, y), yaw = track.pose_at(s)
     boxes = _scene_boxes(track, s, np.random.default_rng(0))[:2]
     pose = (float(x), float(y), float(yaw))
     assert not np.array_equal(renderer.render(*pose, boxes), renderer.render(*pose))
-    times = []
-    for _ in range(50):
-        start = time.perf_counter()
-        renderer.render(*pose, boxes)
-        times.append(time.perf_counter() - start)
-    assert np.median(times) < 3e-3

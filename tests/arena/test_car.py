@@ -10,7 +10,8 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from arena.car import Car, CarSpec, CarState
+from arena.car import Car, CarState
+from arena.car_spec import CarSpec
 from arena.world import PhysicsSettings, close, create_world, step
 
 SETTINGS = PhysicsSettings()
@@ -113,6 +114,15 @@ def test_geometry_follows_the_pose(client: int) -> None:
     np.testing.assert_allclose(sides, [SPEC.length, SPEC.width] * 2, atol=1e-6)
     np.testing.assert_allclose(corners.mean(axis=0), [1.0, 2.0 + SPEC.wheelbase / 2], atol=1e-6)
     assert corners[:, 1].max() > car.model_point()[1]
+
+
+def test_snapshot_points_follow_the_spec(client: int) -> None:
+    spec = CarSpec(wheelbase=0.2, model_point_ahead=0.05)
+    car = Car(client, spec, x=1.0, y=2.0, yaw=0.4)
+    snap = car.snapshot()
+    ahead = np.array([math.cos(0.4), math.sin(0.4)])
+    np.testing.assert_allclose(snap.centre, [1.0, 2.0] + spec.centre_ahead * ahead, atol=1e-6)
+    np.testing.assert_allclose(spec.rear_axle(*snap.model_point, 0.4), [1.0, 2.0], atol=1e-6)
 
 
 def test_teleport_zeroes_motion(client: int) -> None:

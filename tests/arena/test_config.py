@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 import arena
-from arena.config import ConfigError, RaceConfig
+from arena.config import ConfigError, RaceConfig, resolve_track
+from tracks.catalog import get_track
 
 
 def test_json_round_trip_is_exact() -> None:
@@ -60,3 +61,14 @@ def test_obstacles_that_do_not_fit_are_refused_before_the_race() -> None:
 def test_unknown_track_is_refused() -> None:
     with pytest.raises(ConfigError, match="no_such_track"):
         arena.parallel_env(track="no_such_track")
+
+
+def test_resolve_track_turns_the_track_to_the_race_direction() -> None:
+    native = get_track("beginner_loop")
+    other = "cw" if native.direction == "ccw" else "ccw"
+    track, reversed_ = resolve_track(RaceConfig(track="beginner_loop", direction=other))
+    assert track.direction == other and reversed_
+    same, reversed_ = resolve_track(RaceConfig(track="beginner_loop", direction=native.direction))
+    assert same.direction == native.direction and not reversed_
+    with pytest.raises(ConfigError, match="no_such_track"):
+        resolve_track(RaceConfig(track="no_such_track"))

@@ -9,8 +9,9 @@ import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import arena
+from arena.config import resolve_track
 from arena.drivers import LaneFollowerPolicy
-from arena.env import RacingEnv, resolve_track
+from arena.env import RacingEnv
 from arena.lidar import clip_lidar
 from arena.race import run_race
 from arena.sensors_spec import LIDAR_CLIP

@@ -243,3 +243,19 @@ def test_discretized_sector_lidar() -> None:
     assert np.flatnonzero(grid[7]).tolist() == [0]
     small = discretized_sector_lidar(ranges, ANGLES, num_sectors=2, num_values=4, clip=1.0)
     assert small.reshape(2, 4).tolist() == [[0, 1, 0, 0], [1, 0, 0, 0]]
+
+
+def test_sector_views_default_to_the_default_lidar_config() -> None:
+    config = LidarConfig()
+    ranges = np.linspace(0.2, 3.0, 64)
+    assert np.array_equal(
+        sector_lidar(ranges, ANGLES), sector_lidar(ranges, ANGLES, config.num_sectors)
+    )
+    explicit = discretized_sector_lidar(
+        ranges,
+        ANGLES,
+        num_sectors=config.num_sectors,
+        num_values=config.num_values_per_sector,
+        clip=config.clipping_dist,
+    )
+    assert np.array_equal(discretized_sector_lidar(ranges, ANGLES), explicit)

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from arena.params import ObjectsView, closest_objects
+from arena.params import ObjectsView, closest_objects, object_in_camera
+from arena.sensors_spec import DEFAULT_CAMERA
 from tracks.catalog import get_track
 from tracks.track import Track
 
@@ -42,3 +45,12 @@ def test_a_car_does_not_see_itself_in_the_scene() -> None:
     assert others.heading_deg == (0.0, 180.0)
     assert others.distance == (view.distance[0], view.distance[2])
     assert others.location == (view.location[0], view.location[2])
+
+
+def test_object_in_camera_uses_the_camera_field_of_view() -> None:
+    half = math.radians(DEFAULT_CAMERA.hfov_deg / 2)
+    inside = (math.cos(half - 0.01), math.sin(half - 0.01))
+    outside = (math.cos(half + 0.01), math.sin(half + 0.01))
+    assert object_in_camera(0.0, 0.0, 0.0, inside)
+    assert not object_in_camera(0.0, 0.0, 0.0, outside)
+    assert not object_in_camera(0.0, 0.0, math.pi, inside)  # facing away

@@ -6,13 +6,21 @@ import pytest
 
 from arena.config import Penalties
 from arena.rules import STUCK_STEPS, Measurement, RuleBook
+from tracks.track import Track
 
 LENGTH = 20.0
+# A 6 m x 4 m rectangle: a loop exactly LENGTH metres long.
+LOOP = Track.from_arrays(
+    "rectangle",
+    [[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [0.0, 4.0], [0.0, 0.0]],
+    [[0.3, 0.3], [5.7, 0.3], [5.7, 3.7], [0.3, 3.7], [0.3, 0.3]],
+    [[-0.3, -0.3], [6.3, -0.3], [6.3, 4.3], [-0.3, 4.3], [-0.3, -0.3]],
+)
 DT = 1 / 15
 
 
 def book(mode: str = "race", laps: int = 1, max_resets: int | None = None) -> RuleBook:
-    return RuleBook(LENGTH, True, mode, laps, Penalties(), max_resets, time_limit_s=60.0)
+    return RuleBook(LOOP, mode, laps, Penalties(), max_resets, time_limit_s=60.0)
 
 
 def drive(rules: RuleBook, rec, arcs, on_track=True, crashed=False, t0=0.0):
@@ -103,7 +111,7 @@ def test_crash_penalty_and_max_resets() -> None:
 
 
 def test_time_up_truncates() -> None:
-    rules = RuleBook(LENGTH, True, "race", 3, Penalties(), None, time_limit_s=1.0)
+    rules = RuleBook(LOOP, "race", 3, Penalties(), None, time_limit_s=1.0)
     rec = rules.start(0.0, 0.0)
     statuses, _ = drive(rules, rec, [0.01 * i for i in range(1, 16)])
     assert statuses[-1] == "time_up" and rec.truncated and rec.done

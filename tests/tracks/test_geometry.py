@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import ellipse_track
+from tracks.track import Track
 
 TRACK = ellipse_track()
 REVERSED = TRACK.reversed()
@@ -110,3 +111,35 @@ def test_direction_and_reversal_twice_is_identity() -> None:
 def test_track_arrays_are_immutable() -> None:
     with pytest.raises(ValueError):
         TRACK.waypoints[0, 0] = 1.0
+
+
+@settings(max_examples=200, deadline=None)
+@given(fractions, fractions)
+def test_arc_delta_on_a_loop_is_the_short_way_round(start: float, end: float) -> None:
+    length = TRACK.length
+    delta = TRACK.arc_delta(start * length, end * length)
+    assert isinstance(delta, float)
+    assert -length / 2 <= delta < length / 2
+    turns = (end * length - start * length - delta) / length  # whole laps apart
+    assert turns == pytest.approx(round(turns), abs=1e-9)
+
+
+def test_arc_delta_crosses_the_start_line_on_loops_only() -> None:
+    length = TRACK.length
+    assert TRACK.arc_delta(length - 0.5, 0.5) == pytest.approx(1.0)
+    assert TRACK.arc_delta(0.5, length - 0.5) == pytest.approx(-1.0)
+    assert TRACK.arc_delta(2.0, 3.0) == pytest.approx(1.0)
+    centre, left, right = ([[0.0, y], [10.0, y]] for y in (0.0, 0.4, -0.4))
+    straight = Track.from_arrays("straight", centre, left, right)
+    assert not straight.is_loop
+    assert straight.arc_delta(9.5, 0.5) == -9.0
+    assert straight.arc_delta(0.5, 9.5) == 9.0
+
+
+def test_arc_delta_is_vectorised() -> None:
+    length = TRACK.length
+    starts = np.array([0.0, 1.0, length - 1.0])
+    deltas = TRACK.arc_delta(starts, np.array([[0.5], [length - 0.5]]))
+    assert isinstance(deltas, np.ndarray) and deltas.shape == (2, 3)
+    expected = [[0.5, -0.5, 1.5], [-0.5, -1.5, 0.5]]
+    np.testing.assert_allclose(deltas, expected, atol=1e-9)
