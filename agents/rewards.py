@@ -11,6 +11,7 @@ from __future__ import annotations
 import inspect
 import math
 import numbers
+import os
 import traceback
 from collections.abc import Callable
 from pathlib import Path
@@ -191,3 +192,10 @@ def load_sample(name: str, race_type: str = "time_trial") -> RewardFunction:
             f"no sample reward function {name!r}; choose from {list(samples)}"
         )
     return load_reward_function(samples[name], race_type)
+
+
+def resolve_reward(spec: str, race_type: str = "time_trial") -> RewardFunction:
+    """Load a reward function from a ``.py`` file path or a bundled sample's name."""
+    if spec.endswith(".py") or os.sep in spec or Path(spec).exists():
+        return load_reward_function(spec, race_type)
+    return load_sample(spec, race_type)

@@ -15,9 +15,12 @@ import zipfile
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from submissions.runner import OnnxRunner
 
 WEIGHT_FLOOR = 0.05
 UNPLAYED_WIN_RATE = 0.5
@@ -39,32 +42,15 @@ def read_policy_graph(path: str | Path) -> bytes:
     return path.read_bytes()
 
 
-class OnnxOpponent:
-    """A frozen policy run with onnxruntime (submission convention), for one car."""
+def opponent_policy(graph: bytes, discrete: bool, name: str = "opponent") -> OnnxRunner:
+    """A frozen opponent (ONNX bytes, submission convention) that drives one car greedily.
 
-    def __init__(self, graph: bytes, discrete: bool) -> None:
-        import onnxruntime as ort
+    Non-finite outputs are zeroed (``"zero"``): a diverged snapshot keeps driving, badly,
+    instead of stopping the training run.
+    """
+    from submissions.runner import OnnxRunner  # onnxruntime loads only when opponents race
 
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = 1
-        options.inter_op_num_threads = 1
-        self.session = ort.InferenceSession(graph, options, providers=["CPUExecutionProvider"])
-        self.discrete = discrete
-        self.inputs = [
-            (i.name, np.uint8 if "uint8" in i.type else np.float32)
-            for i in self.session.get_inputs()
-        ]
-
-    def reset(self) -> None:
-        """Stateless: nothing to forget."""
-
-    def act(self, observation: dict[str, Any]) -> Any:
-        """Greedy action: argmax index, or two values clipped to ``[-1, 1]``."""
-        feeds = {n: np.asarray(observation[n], dtype=t)[None] for n, t in self.inputs}
-        (out,) = self.session.run(None, feeds)
-        if self.discrete:
-            return int(np.argmax(out[0]))
-        return np.clip(out[0], -1.0, 1.0).astype(np.float32)
+    return OnnxRunner.from_graph(graph, discrete, non_finite="zero", name=name)
 
 
 @dataclass

@@ -15,9 +15,7 @@ import os
 import signal
 import time
 import traceback
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -26,20 +24,11 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from agents.networks import observation_groups
+from agents.rewards import resolve_reward
 from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
 from arena.env import RacingEnv
-
-FAILED = ("off_track", "crashed", "reversed", "immobilized")
-
-
-def resolve_reward(spec: str, race_type: str = "time_trial") -> Callable[[dict[str, Any]], float]:
-    """Load a reward function from a ``.py`` file path or a bundled sample's name."""
-    from agents.rewards import load_reward_function, load_sample
-
-    if spec.endswith(".py") or os.sep in spec or Path(spec).exists():
-        return load_reward_function(spec, race_type)
-    return load_sample(spec, race_type)
+from arena.simtrace import simtrace_row, step_facts
 
 
 @dataclass
@@ -104,10 +93,10 @@ class EnvGroup:
 
     def set_opponents(self, assignments: dict[int, tuple[str, bytes]]) -> None:
         """Give race ``i`` an opponent ``(name, onnx_bytes)`` for its non-learner cars."""
-        from agents.selfplay import OnnxOpponent
+        from agents.selfplay import opponent_policy
 
         for i, (name, graph) in assignments.items():
-            self.opponents[i] = (name, OnnxOpponent(graph, self.discrete))
+            self.opponents[i] = (name, opponent_policy(graph, self.discrete, name))
 
     def drain_simtrace(self) -> list[dict[str, Any]]:
         """Simtrace rows recorded since the last call."""
@@ -137,7 +126,9 @@ class EnvGroup:
                     slot.reward += rew[car]
                     rewards[k], terminated[k], truncated[k] = rew[car], term[car], trunc[car]
                     if self.record_simtrace:
-                        self._record(slot, commands[car], rew[car], infos[car], poses[car], env)
+                        facts = step_facts(infos[car], poses[car], commands[car], rew[car])
+                        episode = slot.episode * len(self.slots) + slot.index
+                        self.rows.append(simtrace_row(facts, episode, wall_clock=time.time()))
                     if term[car] or trunc[car]:
                         episodes.append(self._episode_stats(i, car, slot, infos[car]))
                 if term[car] or trunc[car]:
@@ -176,41 +167,6 @@ class EnvGroup:
         slot.episode += 1
         slot.steps, slot.reward = 0, 0.0
         return stats
-
-    def _record(
-        self,
-        slot: _Slot,
-        action: Any,
-        reward: float,
-        info: dict[str, Any],
-        pose: tuple[float, float, float, float],
-        env: RacingEnv,
-    ) -> None:
-        params = info["params"]
-        status = info["episode_status"]
-        self.rows.append(
-            {
-                "episode": slot.episode * len(self.slots) + slot.index,
-                "steps": slot.steps,
-                "X": pose[0],
-                "Y": pose[1],
-                "yaw": float(np.degrees(pose[2])),
-                "steer": params["steering_angle"],
-                "throttle": params["speed"],
-                "action": action if self.discrete else "[{:.4f}, {:.4f}]".format(*action),
-                "reward": reward,
-                "done": status not in ("in_progress", "prepare"),
-                "all_wheels_on_track": params["all_wheels_on_track"],
-                "progress": info["progress"],
-                "closest_waypoint": params["closest_waypoints"][1],
-                "track_len": env.track.length,
-                "tstamp": info["time"],
-                "episode_status": status,
-                "pause_duration": 0.0,
-                "obstacle_crash_counter": int(status == "crashed"),
-                "wall_clock": time.time(),
-            }
-        )
 
     def _stack_obs(self) -> dict[str, np.ndarray]:
         first = self.last_obs[(self.slots[0].env, self.slots[0].car)]

@@ -14,11 +14,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import numpy as np
-
 from arena.config import RaceConfig
 from arena.env import RacingEnv, RewardFunction
 from arena.policy import Policy
+from arena.simtrace import StepFacts, step_facts
 
 TRACE_COLUMNS = (
     "t",
@@ -60,9 +59,12 @@ class CarResult:
 class RaceResult:
     """A finished race: the config it ran under, per-car results and a compact trace.
 
-    ``trace`` maps car name to columns (:data:`TRACE_COLUMNS`), one value per control step
-    the car was racing; ``bots`` holds the bot cars' ``[x, y, yaw]`` per step and
-    ``obstacles`` the boxes as ``[x, y, yaw, length, width]``.
+    ``trace`` maps car name to columns (:data:`TRACE_COLUMNS`, each a field of
+    :class:`arena.simtrace.StepFacts`), one value per control step the car was racing;
+    ``bots`` holds the bot cars' ``[x, y, yaw]`` per step and ``obstacles`` the boxes as
+    ``[x, y, yaw, length, width]``. ``facts`` keeps each car's whole
+    :class:`~arena.simtrace.StepFacts` per step for simtrace files; it lives only in the
+    process that ran the race (``to_dict`` leaves it out, ``from_dict`` has none).
     """
 
     config: RaceConfig
@@ -73,6 +75,7 @@ class RaceResult:
     trace: dict[str, dict[str, list]] = field(repr=False)
     bots: list[list[list[float]]] = field(default_factory=list, repr=False)
     obstacles: list[list[float]] = field(default_factory=list, repr=False)
+    facts: dict[str, list[StepFacts]] = field(default_factory=dict, repr=False, compare=False)
 
     def car(self, name: str) -> CarResult:
         """The result of the car called ``name``."""
@@ -114,13 +117,6 @@ class RaceResult:
         )
 
 
-def _action_value(action: Any) -> Any:
-    arr = np.asarray(action)
-    if arr.ndim == 0:
-        return int(arr)
-    return [float(v) for v in arr.reshape(-1)]
-
-
 def _act(policy: Policy, observation: dict[str, Any], info: dict[str, Any]) -> Any:
     if getattr(policy, "needs_params", False):
         return policy.act(observation, params=info["params"])
@@ -150,6 +146,7 @@ def run_race(
         for name in names:
             policies[name].reset()
         trace: dict[str, dict[str, list]] = {n: {c: [] for c in TRACE_COLUMNS} for n in names}
+        facts: dict[str, list[StepFacts]] = {n: [] for n in names}
         bots: list[list[list[float]]] = []
         obstacles = [list(o) for o in env.obstacle_poses()]
         last_info = dict(infos)
@@ -160,12 +157,12 @@ def run_race(
             steps += 1
             last_info.update(infos)
             if record_trace:
-                _record(env, trace, actions, rewards, infos)
+                _record(env, trace, facts, actions, rewards, infos)
                 if env.bot_poses():
                     bots.append([list(b) for b in env.bot_poses()])
             if on_step is not None:
                 on_step(env)
-        return _result(config, env, last_info, steps, trace, bots, obstacles)
+        return _result(config, env, steps, trace, facts, bots, obstacles)
     finally:
         env.close()
 
@@ -173,36 +170,26 @@ def run_race(
 def _record(
     env: RacingEnv,
     trace: dict[str, dict[str, list]],
+    facts: dict[str, list[StepFacts]],
     actions: Mapping[str, Any],
     rewards: Mapping[str, float],
     infos: Mapping[str, dict[str, Any]],
 ) -> None:
+    """Append each stepped car's facts, and the trace columns taken from them."""
     poses = env.car_poses()
     for agent, info in infos.items():
-        params = info["params"]
-        x, y, yaw, speed = poses[agent]
-        columns = trace[agent]
-        columns["t"].append(info["time"])
-        columns["x"].append(x)
-        columns["y"].append(y)
-        columns["yaw"].append(yaw)
-        columns["speed"].append(speed)
-        columns["steer"].append(params["steering_angle"])
-        columns["throttle"].append(params["speed"])
-        columns["action"].append(_action_value(actions[agent]))
-        columns["reward"].append(rewards[agent])
-        columns["progress"].append(info["progress"])
-        columns["status"].append(info["episode_status"])
-        columns["all_wheels_on_track"].append(params["all_wheels_on_track"])
-        columns["closest_waypoint"].append(params["closest_waypoints"][1])
+        step = step_facts(info, poses[agent], actions[agent], rewards[agent])
+        facts[agent].append(step)
+        for column, values in trace[agent].items():
+            values.append(getattr(step, column))
 
 
 def _result(
     config: RaceConfig,
     env: RacingEnv,
-    infos: Mapping[str, dict[str, Any]],
     steps: int,
     trace: dict[str, dict[str, list]],
+    facts: dict[str, list[StepFacts]],
     bots: list[list[list[float]]],
     obstacles: list[list[float]],
 ) -> RaceResult:
@@ -249,4 +236,5 @@ def _result(
         trace=trace,
         bots=bots,
         obstacles=obstacles,
+        facts=facts,
     )

@@ -1,12 +1,25 @@
-"""DeepRacer's simtrace CSV: one row per step, read by deepracer-utils and log notebooks."""
+"""One car's step as facts, and DeepRacer's simtrace CSV (read by deepracer-utils) made of them.
+
+:func:`step_facts` is the one place that reads what :meth:`arena.env.RacingEnv.step` gave a
+car (its info and params) together with its pose, action and reward. The race trace of
+:class:`arena.race.RaceResult` keeps some of these facts as columns; :func:`simtrace_row`
+turns them into a simtrace row for training rollouts (:mod:`agents.vecenv`) and evaluation
+races (:func:`race_rows`) alike, so both files agree column by column on the same steps.
+"""
 
 from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from arena.race import RaceResult
 
 SIMTRACE_COLUMNS = (
     "episode",
@@ -31,55 +44,133 @@ SIMTRACE_COLUMNS = (
 )
 
 
-def race_rows(result, car: str, episode: int = 0, wall_clock: float = 0.0) -> list[dict[str, Any]]:
-    """Simtrace rows of one car of a :class:`arena.race.RaceResult`."""
-    columns = result.trace[car]
-    track_len = _track_length(result)
-    dt = result.config.control_dt
-    rows = []
-    n = len(columns["t"])
-    paused = 0.0
-    crashes = 0
-    for i in range(n):
-        status = columns["status"][i]
-        paused += dt if status == "pause" else 0.0
-        crashes += status == "crashed"
-        rows.append(
-            {
-                "episode": episode,
-                "steps": i + 1,
-                "X": columns["x"][i],
-                "Y": columns["y"][i],
-                "yaw": math.degrees(columns["yaw"][i]),
-                "steer": columns["steer"][i],
-                "throttle": columns["throttle"][i],
-                "action": _action(columns["action"][i]),
-                "reward": columns["reward"][i],
-                "done": i == n - 1,
-                "all_wheels_on_track": columns["all_wheels_on_track"][i],
-                "progress": columns["progress"][i],
-                "closest_waypoint": columns["closest_waypoint"][i],
-                "track_len": track_len,
-                "tstamp": columns["t"][i],
-                "episode_status": status,
-                "pause_duration": paused,
-                "obstacle_crash_counter": crashes,
-                "wall_clock": wall_clock,
-            }
-        )
-    return rows
+@dataclass(frozen=True, slots=True)
+class StepFacts:
+    """What one control step of one car produced.
+
+    ``x``, ``y``, ``yaw`` (radians) and ``speed`` are the car origin's measured pose;
+    ``steer`` (degrees) and ``throttle`` (m/s) the commanded action, ``action`` its index
+    (discrete) or its two values (continuous). ``steps`` counts this episode's steps (1 on
+    the first); ``done`` is true on the step that ends the car's episode (a race: its
+    last step). ``pause_left`` is the penalty time still to serve, counting down from the
+    full penalty on the incident's step to 0 once the car runs again; ``crash_count`` the
+    crashes so far this episode.
+    """
+
+    t: float
+    x: float
+    y: float
+    yaw: float
+    speed: float
+    steer: float
+    throttle: float
+    action: int | list[float]
+    reward: float
+    progress: float
+    status: str
+    all_wheels_on_track: bool
+    closest_waypoint: int
+    steps: int
+    done: bool
+    pause_left: float
+    crash_count: int
+    track_len: float
 
 
-def _track_length(result) -> float:
-    from arena.env import resolve_track
+def action_value(action: Any) -> int | list[float]:
+    """An action as plain JSON data: an ``int`` index or a list of floats."""
+    arr = np.asarray(action)
+    if arr.ndim == 0:
+        return int(arr)
+    return [float(v) for v in arr.reshape(-1)]
 
-    return resolve_track(result.config)[0].length
+
+def step_facts(
+    info: Mapping[str, Any],
+    pose: tuple[float, float, float, float],
+    action: Any,
+    reward: float,
+) -> StepFacts:
+    """The facts of one car's step: its ``info`` from ``step``, ``(x, y, yaw, speed)``,
+    the action it was given and its reward."""
+    params = info["params"]
+    x, y, yaw, speed = pose
+    return StepFacts(
+        t=info["time"],
+        x=x,
+        y=y,
+        yaw=yaw,
+        speed=speed,
+        steer=params["steering_angle"],
+        throttle=params["speed"],
+        action=action_value(action),
+        reward=reward,
+        progress=info["progress"],
+        status=info["episode_status"],
+        all_wheels_on_track=params["all_wheels_on_track"],
+        closest_waypoint=params["closest_waypoints"][1],
+        steps=params["steps"],
+        done=info["done"],
+        pause_left=info["pause_left"],
+        crash_count=info["crash_count"],
+        track_len=params["track_length"],
+    )
 
 
-def _action(value: Any) -> Any:
-    if isinstance(value, list):
-        return "[" + ", ".join(f"{v:.4f}" for v in value) + "]"
-    return value
+def simtrace_row(facts: StepFacts, episode: int, wall_clock: float) -> dict[str, Any]:
+    """One simtrace row (keys :data:`SIMTRACE_COLUMNS`) with DeepRacer's meaning per column.
+
+    Where Slipstream's writers once differed, DeepRacer's simapp decides:
+
+    - ``done``: the car's episode ended on this step (a lap or the race finished, an
+      incident in training, the last allowed reset used, time up); a race's penalty pause
+      is not an end.
+    - ``pause_duration``: penalty seconds still to serve: the full penalty on the
+      incident's step, counting down while the car is held, 0 while it runs (always 0
+      in training, where incidents end the episode instead).
+    - ``obstacle_crash_counter``: crashes so far in the episode (cumulative, from 0 at its
+      start), not a per-step flag.
+
+    ``yaw`` is in degrees; ``action`` is the index for discrete spaces and
+    ``"[steer, speed]"`` (4 decimals) for continuous ones; ``tstamp`` is simulated time.
+    """
+    action = facts.action
+    if isinstance(action, list):
+        action = "[" + ", ".join(f"{v:.4f}" for v in action) + "]"
+    return {
+        "episode": episode,
+        "steps": facts.steps,
+        "X": facts.x,
+        "Y": facts.y,
+        "yaw": math.degrees(facts.yaw),
+        "steer": facts.steer,
+        "throttle": facts.throttle,
+        "action": action,
+        "reward": facts.reward,
+        "done": facts.done,
+        "all_wheels_on_track": facts.all_wheels_on_track,
+        "progress": facts.progress,
+        "closest_waypoint": facts.closest_waypoint,
+        "track_len": facts.track_len,
+        "tstamp": facts.t,
+        "episode_status": facts.status,
+        "pause_duration": facts.pause_left,
+        "obstacle_crash_counter": facts.crash_count,
+        "wall_clock": wall_clock,
+    }
+
+
+def race_rows(
+    result: RaceResult, car: str, episode: int = 0, wall_clock: float = 0.0
+) -> list[dict[str, Any]]:
+    """Simtrace rows of one car of an :class:`arena.race.RaceResult` run in this process.
+
+    Step facts are not stored with a result, so one rebuilt with ``from_dict`` has none:
+    that is a ``ValueError``.
+    """
+    if car not in result.facts:
+        raise ValueError(f"no step facts for car {car!r}: simtrace needs a race run here")
+    return [simtrace_row(facts, episode, wall_clock) for facts in result.facts[car]]
 
 
 def write_simtrace(path: str | Path, rows: Iterable[dict[str, Any]]) -> Path:

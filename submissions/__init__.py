@@ -1,4 +1,4 @@
-"""Submissions: the model file format, its validator and the ONNX policy loader.
+"""Submissions: the model file format, its validator, the ONNX policy loader and runner.
 
 Uploaded files are treated as data only: nothing in an archive is ever imported,
 unpickled or executed; the policy graph runs on onnxruntime's allowlisted operators.
@@ -7,6 +7,7 @@ unpickled or executed; the policy graph runs on onnxruntime's allowlisted operat
 from submissions.format import FORMAT_VERSION, InputSpec, Limits, Problem
 from submissions.pack import pack
 from submissions.policy import OnnxPolicy, load_policy
+from submissions.runner import NonFiniteOutput, NonFiniteRule, OnnxRunner
 from submissions.validator import InvalidSubmission, ModelInfo, ValidationReport, validate
 
 __all__ = [
@@ -15,7 +16,10 @@ __all__ = [
     "InvalidSubmission",
     "Limits",
     "ModelInfo",
+    "NonFiniteOutput",
+    "NonFiniteRule",
     "OnnxPolicy",
+    "OnnxRunner",
     "Problem",
     "ValidationReport",
     "load_policy",

@@ -15,6 +15,7 @@ from agents.rewards import (
     check_reward_function,
     load_reward_function,
     load_sample,
+    resolve_reward,
     sample_params,
 )
 
@@ -213,3 +214,13 @@ def test_check_does_not_let_the_function_mutate_params() -> None:
     waypoints = len(params["waypoints"])
     assert check_reward_function(greedy, params) == 1.0
     assert len(params["waypoints"]) == waypoints and params["speed"] == 1.5
+
+
+def test_resolve_reward_takes_a_file_path_or_a_sample_name(tmp_path: Path) -> None:
+    path = tmp_path / "mine.py"
+    path.write_text("def reward_function(params):\n    return 0.5\n")
+    assert resolve_reward(str(path))(sample_params()) == 0.5
+    sample = resolve_reward("follow_center_line", "object_avoidance")
+    assert sample(sample_params()) == load_sample("follow_center_line")(sample_params())
+    with pytest.raises(RewardFunctionError, match="no sample reward function"):
+        resolve_reward("no_such_sample")
