@@ -1,4 +1,9 @@
-"""``slipstream train`` and ``slipstream evaluate`` (a Typer app with those two commands)."""
+"""``slipstream train`` and ``slipstream evaluate`` (a Typer app with those two commands).
+
+Every ``train`` option except ``--out``, ``--clone``, ``--resume`` and ``--hyperparameters``
+is the :class:`~agents.settings.TrainSettings` field of the same name, with the field's
+description as its help and, where the command line takes the same form, its default.
+"""
 
 from __future__ import annotations
 
@@ -10,8 +15,11 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from agents.settings import RESUME_OVERRIDES, TrainSettings, load_settings
+from arena.sensors_spec import IMAGE_SENSORS
+
 if TYPE_CHECKING:
-    from agents.train import TrainSettings
+    from agents.metrics import IterationStats
 
 app = typer.Typer(help="Train and evaluate racing policies.", no_args_is_help=True)
 console = Console()
@@ -34,62 +42,66 @@ def _device(device: str) -> str:
     return device
 
 
-def _settings(**options: Any) -> TrainSettings:
-    from agents.action_spaces import parse_action_space_spec
-    from agents.train import TrainSettings, load_settings
+def _setting(name: str) -> Any:
+    """The option for the ``TrainSettings`` field ``name``, its description as help."""
+    return typer.Option(help=TrainSettings.model_fields[name].description)
 
-    out, resume = options.pop("out"), options.pop("resume")
-    keep = {k: options[k] for k in ("iterations", "minutes", "workers", "device", "threads")}
+
+def _default(name: str) -> Any:
+    """The default of the ``TrainSettings`` field ``name``."""
+    return TrainSettings.model_fields[name].default
+
+
+def _settings(out: Path, resume: bool, options: dict[str, Any]) -> TrainSettings:
+    """The run's settings from the options named after its fields (command-line forms parsed).
+
+    ``--resume`` reads them from the run, but for those in ``RESUME_OVERRIDES``.
+    """
+    from agents.action_spaces import parse_action_space_spec
+
     if resume:
-        return load_settings(out).model_copy(update=keep)
-    space = parse_action_space_spec(options.pop("action_space"))
-    reward = options.pop("reward_fn")
-    if reward.endswith(".py") or Path(reward).exists():
-        reward = str(Path(reward).resolve())
-    sensors = tuple(s.strip() for s in options.pop("sensors").split(",") if s.strip())
-    opponents = tuple(str(Path(p).resolve()) for p in options.pop("opponent") or ())
-    return TrainSettings(
-        action_space=space, reward=reward, sensors=sensors, opponents=opponents, **options
-    )
+        return load_settings(out).model_copy(update={k: options[k] for k in RESUME_OVERRIDES})
+    reward_fn = options["reward_fn"]
+    if reward_fn.endswith(".py") or Path(reward_fn).exists():
+        reward_fn = str(Path(reward_fn).resolve())
+    parsed = {
+        "sensors": tuple(s.strip() for s in options["sensors"].split(",") if s.strip()),
+        "action_space": parse_action_space_spec(options["action_space"]),
+        "reward_fn": reward_fn,
+        "opponent": tuple(str(Path(p).resolve()) for p in options["opponent"] or ()),
+    }
+    return TrainSettings(**{**options, **parsed})
 
 
 @app.command()
 def train(
     out: Annotated[Path, typer.Option(help="Run folder, e.g. runs/NAME.")],
-    track: Annotated[str, typer.Option(help="Track name.")] = "beginner_loop",
-    race_type: Annotated[
-        str, typer.Option(help="time_trial | object_avoidance | head_to_bot | head_to_model")
-    ] = "time_trial",
-    sensors: Annotated[str, typer.Option(help="Comma-separated, e.g. camera,lidar.")] = "camera",
-    action_space: Annotated[
-        str, typer.Option(help="Action-space spec, e.g. 3x3@1.0 or default.")
-    ] = "default",
-    reward_fn: Annotated[
-        str, typer.Option(help="Reward-function file or sample name.")
-    ] = "follow_center_line",
-    minutes: Annotated[float | None, typer.Option(help="Wall-clock budget.")] = None,
-    iterations: Annotated[int | None, typer.Option(help="Iteration budget.")] = None,
+    track: Annotated[str, _setting("track")] = _default("track"),
+    race_type: Annotated[str, _setting("race_type")] = _default("race_type"),
+    sensors: Annotated[str, _setting("sensors")] = ",".join(_default("sensors")),
+    action_space: Annotated[str, _setting("action_space")] = "default",
+    reward_fn: Annotated[str, _setting("reward_fn")] = _default("reward_fn"),
+    minutes: Annotated[float | None, _setting("minutes")] = _default("minutes"),
+    iterations: Annotated[int | None, _setting("iterations")] = _default("iterations"),
     clone: Annotated[Path | None, typer.Option(help="Start from another run's weights.")] = None,
     resume: Annotated[bool, typer.Option(help="Continue the run in --out.")] = False,
-    workers: Annotated[int | None, typer.Option(help="Worker processes (default: cores).")] = None,
-    races: Annotated[int | None, typer.Option(help="Parallel races (default: workers).")] = None,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
-    network: Annotated[str | None, typer.Option(help="Network preset.")] = None,
+    workers: Annotated[int | None, _setting("workers")] = _default("workers"),
+    races: Annotated[int | None, _setting("races")] = _default("races"),
+    seed: Annotated[int, _setting("seed")] = _default("seed"),
+    network: Annotated[str | None, _setting("network")] = _default("network"),
     hyperparameters: Annotated[
         Path | None, typer.Option(help="DeepRacer hyperparameters.json.")
     ] = None,
-    eval_every: Annotated[int, typer.Option(help="Evaluate every N iterations.")] = 5,
-    eval_time_limit: Annotated[
-        float, typer.Option(help="Simulated seconds an evaluation may take.")
-    ] = 120.0,
-    selfplay: Annotated[str, typer.Option(help="head_to_model: shared | pool.")] = "shared",
-    opponent: Annotated[
-        list[Path] | None, typer.Option(help="ONNX / model.zip opponent (repeatable).")
-    ] = None,
-    device: Annotated[str, typer.Option(help="cpu, cuda or cuda:N.")] = "cpu",
-    threads: Annotated[int, typer.Option(help="Torch CPU threads.")] = 1,
+    eval_every: Annotated[int, _setting("eval_every")] = _default("eval_every"),
+    eval_time_limit: Annotated[float, _setting("eval_time_limit")] = _default("eval_time_limit"),
+    selfplay: Annotated[str, _setting("selfplay")] = _default("selfplay"),
+    opponent: Annotated[list[Path] | None, _setting("opponent")] = None,
+    device: Annotated[str, _setting("device")] = _default("device"),
+    threads: Annotated[int, _setting("threads")] = _default("threads"),
 ) -> None:
     """Train a policy with PPO (rsl-rl); Ctrl-C stops cleanly keeping the last checkpoint."""
+    # The parameters named after settings fields (locals() holds only parameters here).
+    options = {k: v for k, v in locals().items() if k in TrainSettings.model_fields}
     from pydantic import ValidationError
 
     from agents.hyperparameters import Hyperparameters
@@ -97,35 +109,16 @@ def train(
 
     if minutes is None and iterations is None and not resume:
         _fail("give --minutes or --iterations")
+    options["device"] = _device(device)
     try:
-        settings = _settings(
-            out=out,
-            resume=resume,
-            track=track,
-            race_type=race_type,
-            sensors=sensors,
-            action_space=action_space,
-            reward_fn=reward_fn,
-            minutes=minutes,
-            iterations=iterations,
-            workers=workers,
-            races=races,
-            seed=seed,
-            network=network,
-            eval_every=eval_every,
-            eval_time_limit_s=eval_time_limit,
-            selfplay=selfplay,
-            opponent=opponent,
-            device=_device(device),
-            threads=threads,
-        )
+        settings = _settings(out, resume, options)
         hp = Hyperparameters.load(hyperparameters) if hyperparameters else None
         if resume and hp is None and (out / "ip" / "hyperparameters.json").exists():
             hp = Hyperparameters.load(out / "ip" / "hyperparameters.json")
         trainer = Trainer(settings, out, hp, clone=clone, resume=resume)
     except (ValueError, ValidationError, FileNotFoundError) as exc:
         _fail(str(exc))
-    if settings.race_type == "time_trial" and not {"camera", "stereo"} & set(settings.sensors):
+    if settings.race_type == "time_trial" and not set(IMAGE_SENSORS) & set(settings.sensors):
         console.print(
             "[yellow]warning:[/] the lidar sees only cars and boxes, and a time trial has "
             "none: a lidar-only car drives blind. Add a camera (--sensors camera,lidar)."
@@ -140,15 +133,15 @@ def train(
     ) as progress:
         task = progress.add_task("training", total=total, status="")
 
-        def on_iteration(row: dict[str, Any]) -> None:
-            status = f"it {row['iteration']}  reward {row['mean_reward']:.1f}  "
-            status += f"progress {row['mean_progress']:.0f}%"
-            if row.get("eval_progress") != "":
-                status += f"  eval {row['eval_progress']:.0f}%"
+        def on_iteration(stats: IterationStats) -> None:
+            status = f"it {stats.iteration}  reward {stats.mean_reward:.1f}  "
+            status += f"progress {stats.mean_progress:.0f}%"
+            if stats.eval is not None:
+                status += f"  eval {stats.eval.progress:.0f}%"
             if settings.iterations:
                 progress.update(task, advance=1, status=status)
             else:
-                progress.update(task, completed=row["elapsed_s"], status=status)
+                progress.update(task, completed=stats.elapsed_s, status=status)
 
         try:
             result = trainer.run(on_iteration)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -15,7 +16,7 @@ from rich.table import Table
 import arena
 from agents.networks import observation_groups
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
-from arena.config import RaceConfig
+from arena.config import RaceConfig, resolve_track
 from arena.race import RaceResult, run_race
 from arena.simtrace import race_rows, write_simtrace
 
@@ -75,7 +76,6 @@ def evaluate_policy(
 
     ``reward_function`` only fills the trace's reward column (default: follow the centre).
     """
-    from arena.env import resolve_track
     from arena.replay import ReplayWriter
 
     writer = ReplayWriter(resolve_track(config)[0]) if replay_path is not None else None
@@ -112,21 +112,35 @@ def write_evaluation(run_dir: Path, result: RaceResult, folder: Path | None = No
     return folder
 
 
-def summary(result: RaceResult) -> dict[str, Any]:
+@dataclass(frozen=True)
+class EvalSummary:
+    """Headline numbers of an evaluation race's first car."""
+
+    laps: int
+    progress: float  # % of the race's laps, the unfinished one in part
+    best_lap: float | None
+    total_time: float | None  # None unless the car finished
+    off_track: int
+    crashes: int
+    resets: int
+    status: str
+
+
+def summary(result: RaceResult) -> EvalSummary:
     """Headline numbers of the first car: laps, progress, best lap, incidents."""
     car = result.car(result.config.cars[0].name)
     progress = result.trace.get(car.name, {}).get("progress") or [0.0]
     partial = 0.0 if car.status == "finished" else float(progress[-1]) / 100.0
-    return {
-        "laps": car.laps,
-        "progress": min(100.0, 100.0 * (car.laps + partial) / result.config.laps),
-        "best_lap": car.best_lap,
-        "total_time": car.total_time,
-        "off_track": car.off_track_count,
-        "crashes": car.crash_count,
-        "resets": car.reset_count,
-        "status": car.status,
-    }
+    return EvalSummary(
+        laps=car.laps,
+        progress=min(100.0, 100.0 * (car.laps + partial) / result.config.laps),
+        best_lap=car.best_lap,
+        total_time=car.total_time,
+        off_track=car.off_track_count,
+        crashes=car.crash_count,
+        resets=car.reset_count,
+        status=car.status,
+    )
 
 
 def results_table(result: RaceResult) -> Table:

@@ -78,11 +78,10 @@ class Hyperparameters(BaseModel):
         mini_batches = max(1, round(steps * num_envs / self.batch_size))
         return {
             "num_steps_per_env": steps,
-            "save_interval": 10**9,  # checkpoints are written by agents.train
             "obs_groups": obs_groups,
             "logger": "tensorboard",
             "multi_gpu": None,
-            "check_for_nan": True,
+            "check_for_nan": True,  # agents.runner stops on NaN from the env, naming the iteration
             "algorithm": {
                 "class_name": "PPO",
                 "learning_rate": self.lr,

@@ -15,87 +15,30 @@ Run layout (``RUN`` = the output folder)::
 
 from __future__ import annotations
 
-import contextlib
-import csv
-import io
 import os
 import time
 from collections.abc import Callable
 from copy import deepcopy
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import torch
-from pydantic import BaseModel, ConfigDict
-from rsl_rl.runners import OnPolicyRunner
 
 import arena
 from agents import evaluate, export, networks, plots
+from agents.checkpoint import checkpoint, checkpoint_path, read_checkpoint, write_checkpoint
+from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
+from agents.metrics import IterationStats, append_metrics
 from agents.model_metadata import DeepRacerMetadata, write_model_metadata
+from agents.rewards import resolve_reward
+from agents.runner import RacingRunner
 from agents.selfplay import OpponentPool
-from agents.vecenv import RacingVecEnv, resolve_reward
-from arena.actions import ActionSpace, DiscreteActionSpace
-from arena.config import RaceType
+from agents.settings import TrainSettings, load_settings, save_settings
+from agents.vecenv import RacingVecEnv
 from arena.simtrace import write_simtrace
 from tracks.catalog import get_track
-
-METRICS_COLUMNS = (
-    "iteration",
-    "elapsed_s",
-    "steps",
-    "episodes",
-    "mean_reward",
-    "mean_progress",
-    "lap_completion",
-    "eval_progress",
-    "eval_laps",
-    "eval_best_lap",
-    "eval_total_time",
-    "eval_off_track",
-    "value_loss",
-    "surrogate_loss",
-    "entropy",
-)
-
-
-class TrainSettings(BaseModel):
-    """Everything that defines a training run (stored as ``RUN/training_settings.json``)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    track: str = "beginner_loop"
-    race_type: RaceType = "time_trial"
-    sensors: tuple[str, ...] = ("camera",)
-    action_space: ActionSpace
-    reward: str = "follow_center_line"
-    network: str | None = None
-    seed: int = 0
-    workers: int | None = None
-    races: int | None = None
-    iterations: int | None = None
-    minutes: float | None = None
-    steps_per_env: int | None = None
-    eval_every: int = 5
-    eval_laps: int = 3
-    eval_time_limit_s: float = 120.0
-    stop_on_clean_eval: bool = False
-    selfplay: Literal["shared", "pool"] = "shared"
-    opponents: tuple[str, ...] = ()
-    snapshot_every: int = 10
-    device: str = "cpu"
-    threads: int = 1
-
-    @property
-    def preset(self) -> str:
-        """The network preset (default by sensors)."""
-        return self.network or networks.default_preset(self.sensors)
-
-    @property
-    def discrete(self) -> bool:
-        """Whether the action space is a discrete list."""
-        return isinstance(self.action_space, DiscreteActionSpace)
 
 
 @dataclass
@@ -103,17 +46,18 @@ class TrainResult:
     """How a run ended."""
 
     run_dir: Path
-    iterations: int
-    elapsed_s: float
+    iterations: int = 0  # iterations finished in this session
+    elapsed_s: float = 0.0  # training time of the run, earlier sessions included
     interrupted: bool = False
     first_clean_eval_s: float | None = None
-    best_lap: float | None = None
-    evaluations: list[dict[str, Any]] = field(default_factory=list)
+    evaluations: list[IterationStats] = field(default_factory=list)  # iterations that evaluated
     model_zip: Path | None = None
 
-
-def _quiet() -> contextlib.AbstractContextManager:
-    return contextlib.redirect_stdout(io.StringIO())
+    @property
+    def best_lap(self) -> float | None:
+        """The best lap of this session's evaluations."""
+        laps = [s.eval.best_lap for s in self.evaluations if s.eval and s.eval.best_lap is not None]
+        return min(laps, default=None)
 
 
 def _rank() -> int:
@@ -138,15 +82,16 @@ class Trainer:
         self.resume = resume
         networks.check_preset(settings.preset, settings.sensors)
         get_track(settings.track)  # raises TrackNotFoundError (a ValueError)
-        resolve_reward(settings.reward, settings.race_type)  # fail early, in this process
+        resolve_reward(settings.reward_fn, settings.race_type)  # fail early, in this process
         self.start_iteration = 0
         self.elapsed_before = 0.0
+        self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
 
     # ------------------------------------------------------------------ setup
     def _write_run_files(self) -> None:
         s = self.settings
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        (self.run_dir / "training_settings.json").write_text(s.model_dump_json(indent=2))
+        save_settings(self.run_dir, s)
         self.hp.write(self.run_dir)
         lidar = arena.CarConfig(name="car0").lidar_config
         meta = DeepRacerMetadata(
@@ -170,14 +115,14 @@ class Trainer:
         )
         pool = None
         learners = None
-        if s.race_type == "head_to_model" and (s.selfplay == "pool" or s.opponents):
+        if s.race_type == "head_to_model" and (s.selfplay == "pool" or s.opponent):
             pool = OpponentPool(seed=s.seed)
-            for path in s.opponents:
+            for path in s.opponent:
                 pool.add_policy(path)
             learners = [config.cars[0].name]
         env = RacingVecEnv(
             config,
-            s.reward,
+            s.reward_fn,
             num_races=s.races,
             num_workers=s.workers,
             learner_cars=learners,
@@ -185,25 +130,21 @@ class Trainer:
         )
         return env, pool
 
-    def _make_runner(self, env: RacingVecEnv) -> OnPolicyRunner:
+    def _make_runner(self, env: RacingVecEnv) -> RacingRunner:
         s = self.settings
         actor, critic, groups = networks.model_configs(s.preset, s.sensors, s.action_space)
         cfg = self.hp.to_rsl_rl(env.num_envs, actor, critic, groups, s.steps_per_env)
-        log_dir = str(self.run_dir / "tensorboard") if _rank() == 0 else None
-        with _quiet():
-            runner = OnPolicyRunner(env, cfg, log_dir=log_dir, device=s.device)
-        runner.logger.git_status_repos = []
-        return runner
+        log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None
+        return RacingRunner(env, cfg, log_dir=log_dir, device=s.device)
 
-    def _load_weights(self, runner: OnPolicyRunner) -> None:
+    def _load_weights(self, runner: RacingRunner) -> None:
         if self.resume:
-            ckpt = torch.load(self._checkpoint(), weights_only=True, map_location=runner.device)
+            ckpt = read_checkpoint(self.run_dir, runner.device)
             runner.alg.load(ckpt, None, strict=True)
             self.start_iteration = int(ckpt["iteration"]) + 1
             self.elapsed_before = float(ckpt["elapsed_s"])
         elif self.clone is not None:
-            path = self.clone / "checkpoints" / "last.pt"
-            ckpt = torch.load(path, weights_only=True, map_location=runner.device)
+            ckpt = read_checkpoint(self.clone, runner.device)
             try:
                 runner.alg.load(ckpt, {"actor": True, "critic": True}, strict=True)
             except RuntimeError as exc:
@@ -212,36 +153,32 @@ class Trainer:
                     "(same sensors, network preset and number of actions are needed)"
                 ) from exc
 
-    def _checkpoint(self) -> Path:
-        return self.run_dir / "checkpoints" / "last.pt"
-
     @staticmethod
-    def _state(
-        runner: OnPolicyRunner, iteration: int, elapsed: float, copy: bool = False
+    def _checkpoint(
+        runner: RacingRunner, iteration: int, elapsed_s: float, copy: bool = False
     ) -> dict[str, Any]:
-        """The checkpoint content (state dicts; deep-copied when ``copy``)."""
+        """The checkpoint content now (deep-copied when ``copy``: kept past an update)."""
         state = runner.alg.save()
         if copy:
             state = {k: deepcopy(v) for k, v in state.items()}
-        return {**state, "iteration": iteration, "elapsed_s": elapsed}
+        return checkpoint(state, iteration, elapsed_s)
 
-    def _save(self, state: dict[str, Any]) -> None:
-        if _rank() != 0:
-            return
-        path = self._checkpoint()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        torch.save(state, path.with_suffix(".tmp"))
-        path.with_suffix(".tmp").replace(path)
+    def _save(self, content: dict[str, Any]) -> None:
+        if self.writes_run_folder:
+            write_checkpoint(self.run_dir, content)
 
     # ------------------------------------------------------------------- loop
-    def run(self, on_iteration: Callable[[dict[str, Any]], None] | None = None) -> TrainResult:
-        """Train until the iteration or time budget is spent (or Ctrl-C); write outputs."""
+    def run(self, on_iteration: Callable[[IterationStats], None] | None = None) -> TrainResult:
+        """Train until the iteration or time budget is spent (or Ctrl-C); write outputs.
+
+        ``on_iteration`` receives each finished iteration's statistics.
+        """
         torch.set_num_threads(self.settings.threads)
         torch.manual_seed(self.settings.seed + _rank())
-        if _rank() == 0:
+        if self.writes_run_folder:
             self._write_run_files()
         env, pool = self._make_env()
-        result = TrainResult(self.run_dir, 0, 0.0)
+        result = TrainResult(self.run_dir)
         try:
             runner = self._make_runner(env)
             self._load_weights(runner)
@@ -250,96 +187,52 @@ class Trainer:
             self._loop(runner, env, pool, result, on_iteration)
         finally:
             env.close()
-        if _rank() == 0 and self._checkpoint().exists():
+        if self.writes_run_folder and checkpoint_path(self.run_dir).exists():
             result.model_zip = self._package(runner, result)
         return result
 
     def _loop(
         self,
-        runner: OnPolicyRunner,
+        runner: RacingRunner,
         env: RacingVecEnv,
         pool: OpponentPool | None,
         result: TrainResult,
-        on_iteration: Callable[[dict[str, Any]], None] | None,
+        on_iteration: Callable[[IterationStats], None] | None,
     ) -> None:
-        """Iterate; on Ctrl-C keep the weights of the last finished iteration."""
-        s = self.settings
-        runner.alg.train_mode()
-        runner.logger.init_logging_writer()
-        self._obs = env.get_observations().to(runner.device)
-        started = time.monotonic()
-        it = self.start_iteration
-        saved = it - 1
-        before_update: dict[str, Any] | None = None
+        """Iterate; checkpoint at each evaluation and at the end.
+
+        An iteration is finished once its outputs are written. On Ctrl-C the checkpoint
+        holds the last finished iteration, never a half-applied update.
+        """
+        runner.start()
+        started = time.monotonic() - self.elapsed_before
+
+        def elapsed() -> float:
+            return time.monotonic() - started
+
+        finished, finished_at = self.start_iteration - 1, self.elapsed_before
+        saved = finished  # the iteration in checkpoints/last.pt
+        before: dict[str, Any] | None = None  # while an iteration runs: the state it started from
         try:
-            while True:
-                elapsed = self.elapsed_before + time.monotonic() - started
-                if self._budget_spent(it, elapsed):
-                    break
-                if pool is not None:
-                    env.set_opponents(dict(enumerate(pool.sample(env.num_races))))
-                t0 = time.monotonic()
-                self._rollout(runner, env)
-                t1 = time.monotonic()
-                before_update = self._state(runner, it - 1, elapsed, copy=True)
-                losses = runner.alg.update()
-                before_update = None
-                self._log(runner, it, t1 - t0, time.monotonic() - t1, losses)
-                elapsed = self.elapsed_before + time.monotonic() - started
-                row = self._after_iteration(runner, env, pool, it, elapsed, losses, result)
-                if row.get("eval_progress") != "":
-                    self._save(self._state(runner, it, elapsed))
+            while not self._budget_spent(finished + 1, elapsed()):
+                it = finished + 1
+                self._draw_opponents(env, pool)
+                before = self._checkpoint(runner, finished, finished_at, copy=True)
+                losses = runner.iteration(it)
+                stats = self._finish_iteration(runner, env, pool, it, elapsed(), losses)
+                if stats.eval is not None:
+                    self._save(self._checkpoint(runner, it, stats.elapsed_s))
                     saved = it
-                result.iterations, result.elapsed_s = it + 1 - self.start_iteration, elapsed
-                it += 1
+                finished, finished_at, before = it, stats.elapsed_s, None
+                self._record(result, stats)
                 if on_iteration is not None:
-                    on_iteration(row)
-                if s.stop_on_clean_eval and result.first_clean_eval_s is not None:
+                    on_iteration(stats)
+                if self.settings.stop_on_clean_eval and result.first_clean_eval_s is not None:
                     break
         except KeyboardInterrupt:
             result.interrupted = True
-            if before_update is not None:
-                self._save(before_update)
-                return
-        if saved != it - 1 and it > self.start_iteration:
-            self._save(self._state(runner, it - 1, result.elapsed_s))
-
-    def _rollout(self, runner: OnPolicyRunner, env: RacingVecEnv) -> None:
-        """Collect one rollout (as rsl-rl's ``learn``) and compute the returns."""
-        alg = runner.alg
-        obs = self._obs
-        with torch.inference_mode():
-            for _ in range(runner.cfg["num_steps_per_env"]):
-                actions = alg.act(obs)
-                obs, rewards, dones, extras = env.step(actions.to(env.device))
-                obs, rewards = obs.to(runner.device), rewards.to(runner.device)
-                dones = dones.to(runner.device)
-                alg.process_env_step(obs, rewards, dones, extras)
-                runner.logger.process_env_step(rewards, dones, extras, None)
-            alg.compute_returns(obs)
-        self._obs = obs
-
-    def _log(
-        self,
-        runner: OnPolicyRunner,
-        it: int,
-        collect_s: float,
-        learn_s: float,
-        losses: dict[str, float],
-    ) -> None:
-        """rsl-rl's TensorBoard logging (its console report is silenced)."""
-        with _quiet():
-            runner.logger.log(
-                it=it,
-                start_it=self.start_iteration,
-                total_it=it + 1,
-                collect_time=collect_s,
-                learn_time=learn_s,
-                loss_dict=losses,
-                learning_rate=runner.alg.learning_rate,
-                action_std=runner.alg.get_policy().output_std,
-                rnd_weight=None,
-            )
+        if saved != finished:  # mid-iteration: the state it started from, else the current one
+            self._save(before or self._checkpoint(runner, finished, finished_at))
 
     def _budget_spent(self, it: int, elapsed: float) -> bool:
         s = self.settings
@@ -352,67 +245,66 @@ class Trainer:
         s = self.settings
         return s.iterations is not None and it + 1 - self.start_iteration >= s.iterations
 
-    # -------------------------------------------------------------- outputs
-    def _after_iteration(
+    # ------------------------------------------------------ between iterations
+    @staticmethod
+    def _draw_opponents(env: RacingVecEnv, pool: OpponentPool | None) -> None:
+        """Give every race an opponent from the pool for the next rollout."""
+        if pool is not None:
+            env.set_opponents(dict(enumerate(pool.sample(env.num_races))))
+
+    def _finish_iteration(
         self,
-        runner: OnPolicyRunner,
+        runner: RacingRunner,
         env: RacingVecEnv,
         pool: OpponentPool | None,
         it: int,
         elapsed: float,
         losses: dict[str, float],
-        result: TrainResult,
-    ) -> dict[str, Any]:
-        s = self.settings
+    ) -> IterationStats:
+        """After an update: the pool learns the results, simtrace, evaluation, metrics."""
         episodes = env.pop_episodes()
-        rows = env.drain_simtrace()
+        simtrace = env.drain_simtrace()
         if pool is not None:
-            for e in episodes:
-                if "opponent" in e:
-                    pool.record(e["opponent"], e["win"])
-            if (it + 1) % s.snapshot_every == 0:
-                pool.add_snapshot(f"snapshot:{it}", self._graph(runner))
-        if _rank() == 0:
-            path = self.run_dir / "0" / "training-simtrace" / f"{it}-iteration.csv"
-            write_simtrace(path, rows)
-        n = max(1, len(episodes))
-        row: dict[str, Any] = {
-            "iteration": it,
-            "elapsed_s": round(elapsed, 2),
-            "steps": len(rows),
-            "episodes": len(episodes),
-            "mean_reward": sum(e["reward"] for e in episodes) / n,
-            "mean_progress": sum(e["progress"] for e in episodes) / n,
-            "lap_completion": sum(e["lap_complete"] for e in episodes) / n,
-            "value_loss": losses.get("value"),
-            "surrogate_loss": losses.get("surrogate"),
-            "entropy": losses.get("entropy"),
-        }
-        row.update(dict.fromkeys(c for c in METRICS_COLUMNS if c.startswith("eval_")))
-        for key in row:
-            if row[key] is None:
-                row[key] = ""
-        if _rank() == 0 and ((it + 1) % s.eval_every == 0 or self._last_iteration(it)):
-            summary = self._evaluate(runner)
-            result.evaluations.append({"iteration": it, "elapsed_s": elapsed, **summary})
-            row.update(
-                eval_progress=summary["progress"],
-                eval_laps=summary["laps"],
-                eval_best_lap=summary["best_lap"] if summary["best_lap"] is not None else "",
-                eval_total_time=summary["total_time"] if summary["total_time"] else "",
-                eval_off_track=summary["off_track"],
-            )
-            clean = summary["laps"] >= s.eval_laps and summary["off_track"] == 0
-            if clean and result.first_clean_eval_s is None:
-                result.first_clean_eval_s = elapsed
-            if summary["best_lap"] is not None:
-                result.best_lap = min(result.best_lap or 1e9, summary["best_lap"])
-        if _rank() == 0:
-            self._append_metrics(row)
-            plots.reward_graph(self.run_dir / "metrics.csv", self.run_dir / "reward_graph.png")
-        return row
+            self._update_pool(pool, runner, it, episodes)
+        if self.writes_run_folder:
+            self._write_training_simtrace(it, simtrace)
+        evaluation = self._evaluate(runner) if self._evaluation_due(it) else None
+        stats = IterationStats.of_iteration(
+            it, elapsed, len(simtrace), episodes, losses, evaluation
+        )
+        if self.writes_run_folder:
+            self._write_metrics(stats)
+        return stats
 
-    def _evaluate(self, runner: OnPolicyRunner) -> dict[str, Any]:
+    def _write_training_simtrace(self, it: int, rows: list[dict[str, Any]]) -> None:
+        write_simtrace(self.run_dir / "0" / "training-simtrace" / f"{it}-iteration.csv", rows)
+
+    def _write_metrics(self, stats: IterationStats) -> None:
+        """Append the iteration to ``metrics.csv`` and redraw the reward graph."""
+        append_metrics(self.run_dir / "metrics.csv", stats)
+        plots.reward_graph(self.run_dir / "metrics.csv", self.run_dir / "reward_graph.png")
+
+    def _update_pool(
+        self,
+        pool: OpponentPool,
+        runner: RacingRunner,
+        it: int,
+        episodes: list[dict[str, Any]],
+    ) -> None:
+        """Record the learner's wins and losses; snapshot it every ``snapshot_every``."""
+        for e in episodes:
+            if "opponent" in e:
+                pool.record(e["opponent"], e["win"])
+        if (it + 1) % self.settings.snapshot_every == 0:
+            pool.add_snapshot(f"snapshot:{it}", self._graph(runner))
+
+    def _evaluation_due(self, it: int) -> bool:
+        """Every ``eval_every`` iterations and after an iteration budget's last (rank 0 only)."""
+        every = (it + 1) % self.settings.eval_every == 0
+        return self.writes_run_folder and (every or self._last_iteration(it))
+
+    def _evaluate(self, runner: RacingRunner) -> EvalSummary:
+        """Race the greedy policy (race mode) and write the evaluation simtrace."""
         s = self.settings
         config = evaluate.evaluation_config(
             s.track,
@@ -421,33 +313,36 @@ class Trainer:
             s.action_space,
             laps=s.eval_laps,
             seed=s.seed,
-            time_limit_s=s.eval_time_limit_s,
+            time_limit_s=s.eval_time_limit,
         )
         policy = evaluate.TorchPolicy(runner.alg.get_policy(), s.discrete)
-        reward = resolve_reward(s.reward, s.race_type)
+        reward = resolve_reward(s.reward_fn, s.race_type)
         race = evaluate.evaluate_policy(config, policy, reward_function=reward)
         runner.alg.train_mode()
         evaluate.write_evaluation(self.run_dir, race)
         return evaluate.summary(race)
 
-    def _append_metrics(self, row: dict[str, Any]) -> None:
-        path = self.run_dir / "metrics.csv"
-        new = not path.exists()
-        with path.open("a", newline="") as handle:
-            writer = csv.DictWriter(handle, fieldnames=METRICS_COLUMNS, extrasaction="ignore")
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
+    def _record(self, result: TrainResult, stats: IterationStats) -> None:
+        """Count the iteration in ``result``, with its evaluation if it had one."""
+        result.iterations = stats.iteration + 1 - self.start_iteration
+        result.elapsed_s = stats.elapsed_s
+        if stats.eval is None:
+            return
+        result.evaluations.append(stats)
+        clean = stats.eval.laps >= self.settings.eval_laps and stats.eval.off_track == 0
+        if clean and result.first_clean_eval_s is None:
+            result.first_clean_eval_s = stats.elapsed_s
 
-    def _graph(self, runner: OnPolicyRunner) -> bytes:
+    # -------------------------------------------------------------- outputs
+    def _graph(self, runner: RacingRunner) -> bytes:
         s = self.settings
         return export.export_onnx(runner.alg.get_policy(), s.sensors, s.action_space)
 
-    def _package(self, runner: OnPolicyRunner, result: TrainResult) -> Path | None:
+    def _package(self, runner: RacingRunner, result: TrainResult) -> Path:
         s = self.settings
-        ckpt = torch.load(self._checkpoint(), weights_only=True, map_location="cpu")
+        ckpt = read_checkpoint(self.run_dir)
         runner.alg.load(ckpt, {"actor": True}, strict=True)
-        reward_source = Path(s.reward).read_text() if s.reward.endswith(".py") else None
+        reward_source = Path(s.reward_fn).read_text() if s.reward_fn.endswith(".py") else None
         return export.pack_model(
             self.run_dir / "model" / "model.zip",
             self._graph(runner),
@@ -468,17 +363,9 @@ class Trainer:
         )
 
 
-def load_settings(run_dir: str | Path) -> TrainSettings:
-    """The settings a run was started with."""
-    return TrainSettings.model_validate_json((Path(run_dir) / "training_settings.json").read_text())
-
-
 def load_actor(run_dir: str | Path, device: str = "cpu") -> tuple[torch.nn.Module, TrainSettings]:
     """A run's trained actor (from ``checkpoints/last.pt``) and its settings."""
     settings = load_settings(run_dir)
     actor = networks.build_actor(settings.preset, settings.sensors, settings.action_space)
-    ckpt = torch.load(
-        Path(run_dir) / "checkpoints" / "last.pt", weights_only=True, map_location=device
-    )
-    actor.load_state_dict(ckpt["actor_state_dict"])
+    actor.load_state_dict(read_checkpoint(run_dir, device)["actor_state_dict"])
     return actor.to(device).eval(), settings

@@ -24,7 +24,8 @@ import arena
 from agents.action_spaces import parse_action_space_spec
 from agents.hyperparameters import Hyperparameters
 from agents.pursuit import PurePursuitPolicy
-from agents.train import Trainer, TrainSettings
+from agents.settings import TrainSettings
+from agents.train import Trainer
 from arena.race import run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
@@ -53,28 +54,29 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
         track=TRACK,
         sensors=tuple(case.split("+")),
         action_space=parse_action_space_spec(SPACE),
-        reward="follow_center_line",
+        reward_fn="follow_center_line",
         minutes=max_minutes,
         workers=workers,
         races=max(1, workers),
         steps_per_env=512 // max(1, workers),
         eval_every=4,
-        eval_time_limit_s=240.0,  # 3 laps at the slowest speed (1/3 m/s) fit
+        eval_time_limit=240.0,  # 3 laps at the slowest speed (1/3 m/s) fit
         stop_on_clean_eval=True,
     )
     started = time.monotonic()
     result = Trainer(settings, out / case.replace("+", "_"), HYPERPARAMETERS).run()
-    best = max(result.evaluations, key=lambda e: e["progress"], default=None)
-    clean = next((e for e in result.evaluations if e["elapsed_s"] == result.first_clean_eval_s), {})
+    evaluations = {s.elapsed_s: s.eval for s in result.evaluations if s.eval is not None}
+    best = max(evaluations.values(), key=lambda e: e.progress, default=None)
+    clean = evaluations.get(result.first_clean_eval_s)
     return {
-        "clean_best_lap": clean.get("best_lap"),
-        "clean_total": clean.get("total_time"),
+        "clean_best_lap": clean.best_lap if clean else None,
+        "clean_total": clean.total_time if clean else None,
         "case": case,
         "minutes": result.first_clean_eval_s / 60.0 if result.first_clean_eval_s else None,
         "wall_minutes": (time.monotonic() - started) / 60.0,
         "iterations": result.iterations,
         "best_lap": result.best_lap,
-        "best_eval_progress": best["progress"] if best else 0.0,
+        "best_eval_progress": best.progress if best else 0.0,
     }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from copy import deepcopy
 from pathlib import Path
 
 import pytest
@@ -14,7 +15,8 @@ import arena
 from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
 from agents.hyperparameters import Hyperparameters
-from agents.train import Trainer, TrainSettings, load_actor
+from agents.settings import TrainSettings
+from agents.train import Trainer, load_actor
 from agents.vecenv import RacingVecEnv
 
 SPACE = parse_action_space_spec("3x3@1.0")
@@ -28,7 +30,7 @@ def _settings(**kw) -> TrainSettings:
         "workers": 0,
         "races": 1,
         "eval_every": 1000,
-        "eval_time_limit_s": 5.0,
+        "eval_time_limit": 5.0,
     }
     return TrainSettings(**{**base, **kw})
 
@@ -65,7 +67,7 @@ def test_ppo_beats_a_random_policy(tmp_path):
     reward = tmp_path / "fast.py"
     reward.write_text(FAST_REWARD)
     hp = Hyperparameters(batch_size=128, num_epochs=5, lr=1e-3, beta_entropy=0.0)
-    settings = _settings(races=2, iterations=6, steps_per_env=128, reward=str(reward))
+    settings = _settings(races=2, iterations=6, steps_per_env=128, reward_fn=str(reward))
     Trainer(settings, tmp_path / "run", hp).run()
     actor, _ = load_actor(tmp_path / "run")
     gen = torch.Generator().manual_seed(1)
@@ -104,7 +106,7 @@ def test_clone_with_changed_speed_range(tmp_path):
 
 
 def test_ctrl_c_keeps_the_last_finished_iteration(tmp_path):
-    def interrupt(row):
+    def interrupt(stats):
         raise KeyboardInterrupt
 
     result = Trainer(_settings(iterations=5), tmp_path / "run", TINY).run(interrupt)
@@ -203,3 +205,39 @@ def test_cli_under_torchrun_without_gpus_says_what_to_do(tmp_path, monkeypatch):
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 2 and "--device cuda" in result.output
     assert not (tmp_path / "run").exists()
+
+
+def test_iterations_report_typed_stats_and_evaluations_checkpoint(tmp_path):
+    seen = []
+    settings = _settings(iterations=3, eval_every=2)
+    result = Trainer(settings, tmp_path / "run", TINY).run(seen.append)
+    assert [s.iteration for s in seen] == [0, 1, 2]
+    assert [s.eval is not None for s in seen] == [False, True, True]  # every 2nd, and the last
+    assert result.evaluations == seen[1:] and result.iterations == 3
+    assert result.elapsed_s == seen[-1].elapsed_s
+    rows = (tmp_path / "run" / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 4 and rows[1].split(",")[7] == ""  # no evaluation after iteration 0
+    ckpt = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
+    assert ckpt["iteration"] == 2 and ckpt["elapsed_s"] == seen[-1].elapsed_s
+
+
+def test_ctrl_c_during_an_update_keeps_the_weights_it_started_from(tmp_path, monkeypatch):
+    from agents.runner import RacingRunner
+
+    finished = {}
+    real_iteration = RacingRunner.iteration
+
+    def interrupted_second_update(runner, it):
+        if it == 1:
+            finished.update(deepcopy(runner.alg.get_policy().state_dict()))
+            real_iteration(runner, it)  # the weights change ...
+            raise KeyboardInterrupt  # ... and Ctrl-C arrives before the iteration is done
+        return real_iteration(runner, it)
+
+    monkeypatch.setattr(RacingRunner, "iteration", interrupted_second_update)
+    result = Trainer(_settings(iterations=5), tmp_path / "run", TINY).run()
+    assert result.interrupted and result.iterations == 1
+    ckpt = torch.load(tmp_path / "run" / "checkpoints" / "last.pt", weights_only=True)
+    assert ckpt["iteration"] == 0 and finished
+    for key, value in finished.items():
+        assert torch.equal(ckpt["actor_state_dict"][key], value), key

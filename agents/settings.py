@@ -1,0 +1,115 @@
+"""The settings of a training run: one declaration, one description per field.
+
+Each setting ``slipstream train`` takes is the option of the field's name, with the field's
+description as its help (``agents/cli.py``); the rest (``steps_per_env``, ``eval_laps``,
+``stop_on_clean_eval``, ``snapshot_every``) are for Python callers. A run stores its
+settings as ``RUN/training_settings.json``. This module imports no torch, so the CLI can
+read it at start-up.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from arena.actions import ActionSpace, DiscreteActionSpace
+from arena.config import RACE_TYPES, RaceType
+
+# Fields a ``--resume`` takes from the command line; every other one comes from the run.
+RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
+# Names used by ``training_settings.json`` files written before the fields took the
+# command line's names; such files still load.
+_FORMER_NAMES = {
+    "reward": "reward_fn",
+    "opponents": "opponent",
+    "eval_time_limit_s": "eval_time_limit",
+}
+
+
+class TrainSettings(BaseModel):
+    """Everything that defines a training run (stored as ``RUN/training_settings.json``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    track: str = Field("beginner_loop", description="Track name.")
+    race_type: RaceType = Field("time_trial", description=" | ".join(RACE_TYPES))
+    sensors: tuple[str, ...] = Field(
+        ("camera",), description="Sensors; on the command line comma-separated, e.g. camera,lidar."
+    )
+    action_space: ActionSpace = Field(
+        description="Action space; on the command line a spec, e.g. 3x3@1.0 or default."
+    )
+    reward_fn: str = Field(
+        "follow_center_line", description="Reward-function file or bundled sample name."
+    )
+    network: str | None = Field(None, description="Network preset (default: by sensors).")
+    seed: int = Field(0, description="Random seed.")
+    workers: int | None = Field(
+        None, description="Worker processes (default: CPU cores; 0: in-process)."
+    )
+    races: int | None = Field(None, description="Parallel races (default: one per worker).")
+    iterations: int | None = Field(None, description="Iteration budget.")
+    minutes: float | None = Field(None, description="Wall-clock budget in minutes.")
+    steps_per_env: int | None = Field(
+        None,
+        description="Rollout steps per slot and iteration "
+        "(default: from num_episodes_between_training).",
+    )
+    eval_every: int = Field(
+        5, description="Evaluate every N iterations (and after the last of an iteration budget)."
+    )
+    eval_laps: int = Field(3, description="Laps of each evaluation race.")
+    eval_time_limit: float = Field(120.0, description="Simulated seconds an evaluation may take.")
+    stop_on_clean_eval: bool = Field(
+        False, description="Stop at the first evaluation with every lap and no off-track."
+    )
+    selfplay: Literal["shared", "pool"] = Field(
+        "shared", description="head_to_model: shared | pool."
+    )
+    opponent: tuple[str, ...] = Field(
+        (), description="ONNX / model.zip opponent for head_to_model (repeatable)."
+    )
+    snapshot_every: int = Field(
+        10, description="Pool self-play: snapshot the learner into the pool every N iterations."
+    )
+    device: str = Field("cpu", description="cpu, cuda or cuda:N.")
+    threads: int = Field(1, description="Torch CPU threads.")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _rename_former_fields(cls, data: Any) -> Any:
+        """Read settings files that use the fields' former names."""
+        if isinstance(data, dict) and _FORMER_NAMES.keys() & data.keys():
+            return {_FORMER_NAMES.get(key, key): value for key, value in data.items()}
+        return data
+
+    @property
+    def preset(self) -> str:
+        """The network preset (default by sensors)."""
+        from agents.networks import default_preset  # torch: not at CLI start-up
+
+        return self.network or default_preset(self.sensors)
+
+    @property
+    def discrete(self) -> bool:
+        """Whether the action space is a discrete list."""
+        return isinstance(self.action_space, DiscreteActionSpace)
+
+
+def settings_path(run_dir: str | Path) -> Path:
+    """Where a run keeps its settings."""
+    return Path(run_dir) / "training_settings.json"
+
+
+def save_settings(run_dir: str | Path, settings: TrainSettings) -> Path:
+    """Write ``RUN/training_settings.json``."""
+    path = settings_path(run_dir)
+    path.write_text(settings.model_dump_json(indent=2))
+    return path
+
+
+def load_settings(run_dir: str | Path) -> TrainSettings:
+    """The settings a run was started with (``RUN/training_settings.json``)."""
+    return TrainSettings.model_validate_json(settings_path(run_dir).read_text())
