@@ -1,4 +1,4 @@
-"""``python -m league ...`` runs the ``slipstream`` command (used for child processes)."""
+"""``python -m league ...`` runs the league's own commands, as ``slipstream league ...``."""
 
 from league.cli import app
 

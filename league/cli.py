@@ -1,40 +1,266 @@
-"""The ``slipstream`` command: one entry point, a subcommand group per package."""
+"""``slipstream league``: serve the league, create racers and events, submit, standings."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
 import typer
+from rich.console import Console
+from rich.table import Table
 
-from agents.cli import evaluate_command, train
-from arena.cli import race_command
-from league.league_cli import app as league_app
-from submissions.cli import app as model_app
-from tracks.cli import app as tracks_app
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session
 
-app = typer.Typer(
-    name="slipstream",
-    help="Slipstream: a self-hosted racing league for reinforcement-learning cars.",
-    no_args_is_help=True,
-    pretty_exceptions_enable=False,
-)
-app.add_typer(tracks_app, name="tracks", help="Tracks: list, show, import, racing line.")
-app.add_typer(model_app, name="model", help="Model files: validate, inspect, pre-flight.")
-app.add_typer(league_app, name="league", help="The league: server, racers, events, standings.")
-app.command("race", help="Race built-in drivers on a track.")(race_command)
-app.command("train", help="Train a policy with PPO (rsl-rl), DeepRacer-style.")(train)
-app.command("evaluate", help="Race a training run's policy and print its results.")(
-    evaluate_command
-)
+    from league.settings import Settings
+
+app = typer.Typer(help="The league server and its client commands.", no_args_is_help=True)
+console = Console()
+DEFAULT_SERVER = "http://127.0.0.1:8000"
+
+DataDir = Annotated[
+    Path | None,
+    typer.Option(help="Data directory (default: SLIPSTREAM_DATA_DIR or ./slipstream-data)."),
+]
+Server = Annotated[str, typer.Option(envvar="SLIPSTREAM_SERVER", help="League server URL.")]
+Token = Annotated[
+    str | None, typer.Option(envvar="SLIPSTREAM_TOKEN", help="Your API token.", show_default=False)
+]
+
+
+def _settings(data_dir: Path | None) -> Settings:
+    from league.settings import Settings
+
+    return Settings(data_dir=data_dir) if data_dir is not None else Settings()
+
+
+def _migrated_session(data_dir: Path | None) -> Session:
+    from league.db import make_engine, make_session_factory
+    from league.migrations import upgrade
+
+    settings = _settings(data_dir)
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
+    upgrade(engine)
+    return make_session_factory(engine)()
 
 
 @app.command()
-def demo(
-    out: str = typer.Option("slipstream-demo", help="Folder for the demo's data, logs, pictures."),
-    port: int = typer.Option(8000, help="Port of the demo's league server."),
-    serve: bool = typer.Option(True, help="Keep serving after the first leaderboards."),
-    round_interval: int = typer.Option(60, help="Seconds between head-to-model rounds."),
-    timeout: float = typer.Option(300.0, help="Longest wait for the first results, seconds."),
+def serve(
+    host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option(help="Port to listen on.")] = 8000,
+    data_dir: DataDir = None,
 ) -> None:
-    """The whole league on this machine: tracks, server, scheduler, worker, leaderboards."""
-    from league.demo import run_demo
+    """Run the database migrations, then serve the API (docs at /docs)."""
+    import uvicorn
 
-    run_demo(out, port=port, keep_serving=serve, round_interval_s=round_interval, timeout_s=timeout)
+    from league.app import create_app
+    from league.db import make_engine
+    from league.migrations import upgrade
+
+    settings = _settings(data_dir)
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    upgrade(make_engine(settings.db_url, settings.sqlite_busy_timeout_ms))
+    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+
+
+@app.command("create-racer")
+def create_racer(
+    alias: Annotated[str, typer.Argument(help="The racer's alias (2-32 letters/digits/_.-).")],
+    admin: Annotated[bool, typer.Option("--admin", help="Make them a league admin.")] = False,
+    data_dir: DataDir = None,
+) -> None:
+    """Create a racer directly in the database and print their API token (shown once)."""
+    from pydantic import ValidationError
+
+    from league import crud
+    from league.schemas import RacerCreate
+
+    try:
+        spec = RacerCreate(alias=alias, admin=admin)
+    except ValidationError as exc:
+        raise typer.BadParameter(exc.errors()[0]["msg"], param_hint="ALIAS") from None
+    with _migrated_session(data_dir) as session:
+        try:
+            racer, token = crud.create_racer(session, spec.alias, spec.admin)
+        except crud.Conflict as exc:
+            console.print(f"[red]{exc}[/red]")
+            raise typer.Exit(1) from None
+    console.print(f"racer [bold]{racer.alias}[/bold] (id {racer.id}, {racer.role})")
+    console.print("API token (shown once, keep it safe):")
+    typer.echo(token)
+
+
+def _read_ruleset(path: Path) -> dict:
+    text = path.read_text()
+    if path.suffix.lower() in (".yaml", ".yml"):
+        import yaml
+
+        return yaml.safe_load(text) or {}
+    return json.loads(text)
+
+
+@app.command("create-event")
+def create_event(
+    name: Annotated[str | None, typer.Option(help="Event name (or in the ruleset file).")] = None,
+    ruleset: Annotated[
+        Path | None, typer.Option("--ruleset", "-f", help="YAML or JSON file of event fields.")
+    ] = None,
+    race_type: Annotated[str | None, typer.Option(help="time_trial, object_avoidance, ...")] = None,
+    track: Annotated[str | None, typer.Option(help="Track name.")] = None,
+    direction: Annotated[str | None, typer.Option(help="ccw or cw.")] = None,
+    laps: Annotated[int | None, typer.Option(help="Laps per race.")] = None,
+    metric: Annotated[str | None, typer.Option(help="total, best or average.")] = None,
+    seeds: Annotated[str | None, typer.Option(help="Evaluation seeds, e.g. 0,1,2.")] = None,
+    data_dir: DataDir = None,
+) -> None:
+    """Create an event directly in the database; options override the ruleset file."""
+    from pydantic import ValidationError
+
+    from arena.config import describe_validation_error
+    from league import crud
+    from league.schemas import EventCreate
+
+    fields = _read_ruleset(ruleset) if ruleset else {}
+    given = {
+        "name": name,
+        "race_type": race_type,
+        "track": track,
+        "direction": direction,
+        "laps": laps,
+        "ranking_metric": metric,
+        "seeds": [int(s) for s in seeds.split(",")] if seeds else None,
+    }
+    fields.update({k: v for k, v in given.items() if v is not None})
+    try:
+        spec = EventCreate.model_validate(fields)
+        with _migrated_session(data_dir) as session:
+            event = crud.create_event(session, spec, created_by=None)
+    except ValidationError as exc:
+        console.print(f"[red]{describe_validation_error(exc)}[/red]")
+        raise typer.Exit(1) from None
+    except ValueError as exc:
+        console.print(f"[red]{exc}[/red]")
+        raise typer.Exit(1) from None
+    console.print(f"event [bold]{event.id}[/bold]: {event.name} ({event.race_type}, {event.track})")
+    console.print(f"ruleset hash {event.ruleset_hash}")
+
+
+@app.command()
+def submit(
+    model: Annotated[Path, typer.Argument(exists=True, dir_okay=False, help="Model archive.")],
+    event: Annotated[int, typer.Option("--event", help="Event id to enter.")],
+    server: Server = DEFAULT_SERVER,
+    token: Token = None,
+    name: Annotated[str | None, typer.Option(help="Model name on the server.")] = None,
+) -> None:
+    """Validate a model locally, upload it and enter it in an event."""
+    from league.client import LeagueClient, LeagueError
+    from submissions import validate
+
+    if not token:
+        console.print("[red]an API token is needed: --token or SLIPSTREAM_TOKEN[/red]")
+        raise typer.Exit(2)
+    report = validate(model)
+    if not report.ok:
+        console.print(f"[red]{model} fails validation; nothing was uploaded:[/red]")
+        for problem in report.problems:
+            console.print(f"  - {problem}")
+        raise typer.Exit(1)
+    try:
+        with LeagueClient(server, token) as client:
+            record = client.upload_model(model, name)
+            entry = client.enter(event, record["id"])
+    except LeagueError as exc:
+        console.print(f"[red]the server refused: {exc.message}[/red]")
+        for problem in exc.problems:
+            console.print(f"  - {problem.get('field')}: {problem.get('message')}")
+        raise typer.Exit(1) from None
+    console.print(f"model {record['id']} ({record['name']}) entered in event {event}")
+    console.print(f"entry {entry['entry_id']}; jobs queued: {entry['job_ids']}")
+
+
+def _seconds(ms: int | None) -> str:
+    return "-" if ms is None else f"{ms / 1000:.3f}"
+
+
+@app.command()
+def standings(
+    event: Annotated[int, typer.Argument(help="Event id.")],
+    server: Server = DEFAULT_SERVER,
+) -> None:
+    """Print an event's leaderboard as a table."""
+    from league.client import LeagueClient, LeagueError
+
+    try:
+        with LeagueClient(server) as client:
+            info = client.event(event)
+            board = client.leaderboard(event)
+    except LeagueError as exc:
+        console.print(f"[red]{exc.message}[/red]")
+        raise typer.Exit(1) from None
+    console.print(standings_table(info, board))
+
+
+@app.command()
+def scheduler(data_dir: DataDir = None) -> None:
+    """Run the scheduler daemon: jobs for entries, head-to-model rounds, event closing."""
+    import logging
+
+    from league.db import make_engine
+    from league.migrations import upgrade
+    from league.scheduler import Scheduler
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    settings = _settings(data_dir)
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    upgrade(make_engine(settings.db_url, settings.sqlite_busy_timeout_ms))
+    Scheduler(settings).run_forever()
+
+
+@app.command()
+def worker(
+    concurrency: Annotated[int, typer.Option(min=1, help="Worker processes (one race each).")] = 1,
+    data_dir: DataDir = None,
+) -> None:
+    """Run evaluation workers: lease jobs, race them sandboxed, record results."""
+    import logging
+    import os
+
+    from league.worker import supervise
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    if data_dir is not None:
+        os.environ["SLIPSTREAM_DATA_DIR"] = str(data_dir)
+    supervise(concurrency)
+
+
+def standings_table(info: dict, board: dict) -> Table:
+    """An event's leaderboard (as the API returns it) as a Rich table."""
+    rated = board["race_type"] == "head_to_model"
+    table = Table(title=f"{info['name']} ({info['race_type']}, {board['ranking_metric']} time)")
+    columns = ["rank", "alias", "laps", "best s", "average s", "total s", "off-track"]
+    columns += ["collisions", "resets", "score s", "submissions"]
+    columns += ["mu", "sigma", "rating"] if rated else []
+    for column in columns:
+        table.add_column(column, justify="left" if column == "alias" else "right")
+    for row in board["rows"]:
+        cells = [
+            str(row["rank"]),
+            row["alias"],
+            str(row["lap_count"]),
+            _seconds(row["best_lap_ms"]),
+            _seconds(row["average_lap_ms"]),
+            _seconds(row["total_time_ms"]),
+            str(row["off_track_count"]),
+            str(row["collision_count"]),
+            str(row["reset_count"]),
+            _seconds(row["ranking_score_ms"]),
+            str(row["submission_count"]),
+        ]
+        if rated:
+            cells += [f"{row[k]:.2f}" if row[k] is not None else "-" for k in ("mu", "sigma")]
+            cells.append(f"{row['ordinal']:.2f}" if row["ordinal"] is not None else "-")
+        table.add_row(*cells)
+    return table

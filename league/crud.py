@@ -1,4 +1,8 @@
-"""Database operations shared by the API, the CLI and (later) the scheduler and workers."""
+"""Database writes shared by the API, the CLI and the workers: racers, events, models, races.
+
+Standings and ratings live in :mod:`league.ranking`, job leases and completion in
+:mod:`league.queue`; an event's ruleset is frozen by :mod:`league.rulesets`.
+"""
 
 from __future__ import annotations
 
@@ -7,18 +11,17 @@ from collections.abc import Mapping
 from datetime import datetime
 from typing import TYPE_CHECKING
 
-from sqlalchemy import func, select, update
+from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from arena.config import RaceConfig
-from league import ranking
 from league.auth import hash_token, new_token
-from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, Rating, utcnow
+from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, utcnow
+from league.queue import evaluation_jobs
+from league.rulesets import event_config
 from league.schemas import EventCreate
 from league.storage import Storage
 from submissions import ModelInfo
-from tracks.catalog import builtin_names, get_track
 
 if TYPE_CHECKING:
     from arena.race import RaceResult
@@ -39,21 +42,6 @@ def create_racer(session: Session, alias: str, admin: bool = False) -> tuple[Rac
         session.rollback()
         raise Conflict(f"The alias {alias!r} is already taken.") from None
     return racer, token
-
-
-def event_config(spec: EventCreate) -> RaceConfig:
-    """The event's ruleset as a race config with placeholder cars (``ConfigError`` if bad)."""
-    if spec.track not in builtin_names():
-        get_track(spec.track)  # raises a readable error for an unknown track
-    cars = [{"name": "car0"}, {"name": "car1"}] if spec.race_type == "head_to_model" else None
-    fields = spec.model_dump(
-        include={
-            "track", "direction", "race_type", "laps", "penalties", "max_resets",
-            "time_limit_s", "obstacles", "bots",
-        },
-        exclude_none=True,
-    )  # fmt: skip
-    return RaceConfig.build(**fields, **({"cars": cars} if cars else {}))
 
 
 def create_event(session: Session, spec: EventCreate, created_by: int | None) -> Event:
@@ -136,11 +124,9 @@ def enter_model(
         raise Conflict(f"Model {model.id} is already entered in event {event.id}.") from None
     jobs = []
     if event.race_type != "head_to_model":
-        jobs = [Job(event_id=event.id, entry_id=entry.id, seed=seed) for seed in event.seeds]
+        jobs = [Job(**row) for row in evaluation_jobs(event.id, entry.id, event.seeds)]
         session.add_all(jobs)
-    session.execute(
-        update(Event).where(Event.id == event.id).values(results_version=Event.results_version + 1)
-    )
+    bump_results_version(session, event.id)
     session.commit()
     return entry, jobs
 
@@ -151,14 +137,15 @@ def record_race(
     event: Event,
     result: RaceResult,
     entries: Mapping[str, Entry],
-    job: Job | None = None,
     *,
+    job_id: int | None = None,
     commit: bool = True,
 ) -> Race:
-    """Store a finished race: config, per-car results (ms), trace file; mark ``job`` done.
+    """Store a finished race: config, per-car results (ms), trace file, the job it ran for.
 
-    ``entries`` maps car names to the entries that drove them (bots have none). With
-    ``commit=False`` the rows join the caller's transaction (workers commit once).
+    ``entries`` maps car names to the entries that drove them (bots have none). The job's
+    own state is the queue's (:func:`league.queue.claim_done`). With ``commit=False`` the
+    rows join the caller's transaction (workers commit once).
     """
     trace = json.dumps(
         {"trace": result.trace, "bots": result.bots, "obstacles": result.obstacles},
@@ -167,7 +154,7 @@ def record_race(
     trace_sha, _ = storage.put("traces", trace)
     race = Race(
         event_id=event.id,
-        job_id=job.id if job else None,
+        job_id=job_id,
         ruleset_hash=result.config.ruleset_hash(),
         seed=result.config.seed,
         config=json.loads(result.config.to_json()),
@@ -200,114 +187,20 @@ def record_race(
             )
         )
     session.add(race)
-    if job is not None:
-        job.status = "done"
-        job.lease_owner = None
-        job.lease_expires_at = None
-    session.execute(
-        update(Event).where(Event.id == event.id).values(results_version=Event.results_version + 1)
-    )
+    bump_results_version(session, event.id)
     if commit:
         session.commit()
     return race
 
 
-def rate_race(session: Session, race: Race, *, commit: bool = True) -> None:
-    """Update the head-to-head ratings of the models in ``race`` (Plackett-Luce).
+def bump_results_version(session: Session, event_id: int) -> None:
+    """Mark the event's results as changed (its cached leaderboards go stale).
 
-    With ``commit=False`` the update joins the caller's transaction.
+    Joins the caller's transaction; every write that changes a leaderboard calls this.
     """
-    cars = [c for c in race.cars if c.model_id is not None]
-    if len(cars) < 2:
-        return
-    held = {
-        r.model_id: r
-        for r in session.scalars(
-            select(Rating).where(
-                Rating.event_id == race.event_id, Rating.model_id.in_([c.model_id for c in cars])
-            )
-        )
-    }
-    start = ranking.initial_skill()
-    skills = [
-        ranking.Skill(held[c.model_id].mu, held[c.model_id].sigma, held[c.model_id].races)
-        if c.model_id in held
-        else start
-        for c in cars
-    ]
-    updated = ranking.rate(skills, [c.finish_position for c in cars])
-    for car, skill in zip(cars, updated, strict=True):
-        row = held.get(car.model_id) or Rating(event_id=race.event_id, model_id=car.model_id)
-        row.mu, row.sigma, row.races = skill.mu, skill.sigma, skill.races
-        session.add(row)
     session.execute(
-        update(Event)
-        .where(Event.id == race.event_id)
-        .values(results_version=Event.results_version + 1)
+        update(Event).where(Event.id == event_id).values(results_version=Event.results_version + 1)
     )
-    if commit:
-        session.commit()
-
-
-def leaderboard(session: Session, event: Event) -> list[ranking.Standing]:
-    """The event's standings from its stored results, entries and ratings."""
-    rows = session.execute(
-        select(RaceCar, Race.id, Entry.racer_id, Racer.alias, Model.name)
-        .join(Race, RaceCar.race_id == Race.id)
-        .join(Entry, RaceCar.entry_id == Entry.id)
-        .join(Racer, Entry.racer_id == Racer.id)
-        .join(Model, Entry.model_id == Model.id)
-        .where(Race.event_id == event.id)
-    ).all()
-    results = [
-        ranking.Result(
-            racer_id=racer_id,
-            alias=alias,
-            model_id=car.model_id,
-            model_name=model_name,
-            race_id=race_id,
-            status=car.status,
-            laps=car.laps,
-            best_ms=car.best_ms,
-            average_ms=car.average_ms,
-            total_ms=car.total_ms,
-            off_track_count=car.off_track_count,
-            crash_count=car.crash_count,
-            reset_count=car.reset_count,
-            distance_m=car.distance_m,
-        )
-        for car, race_id, racer_id, alias, model_name in rows
-    ]
-    counts = dict(
-        session.execute(
-            select(Entry.racer_id, func.count(Entry.id))
-            .where(Entry.event_id == event.id)
-            .group_by(Entry.racer_id)
-        ).all()
-    )
-    skills = None
-    if event.race_type == "head_to_model":
-        skills = {
-            r.model_id: ranking.Skill(r.mu, r.sigma, r.races)
-            for r in session.scalars(select(Rating).where(Rating.event_id == event.id))
-        }
-        results += _unraced_entries(session, event, {r.model_id for r in results})
-    return ranking.standings(results, event.ranking_metric, counts, skills)
-
-
-def _unraced_entries(session: Session, event: Event, raced: set[int]) -> list[ranking.Result]:
-    """Head-to-head entries with no race yet, so that they show on the board."""
-    rows = session.execute(
-        select(Entry.racer_id, Entry.model_id, Racer.alias, Model.name)
-        .join(Racer, Entry.racer_id == Racer.id)
-        .join(Model, Entry.model_id == Model.id)
-        .where(Entry.event_id == event.id)
-    ).all()
-    return [
-        ranking.unraced(racer_id, alias, model_id, name)
-        for racer_id, model_id, alias, name in rows
-        if model_id not in raced
-    ]
 
 
 def _ms(seconds: float | None) -> int | None:

@@ -50,11 +50,12 @@ def demo_events(round_interval_s: int) -> list[EventCreate]:
 
 def print_tracks(console: Console, out: Path) -> None:
     """The built-in tracks with their yardstick lap times; a picture of the first."""
+    from agents.pursuit import car_limits
     from tracks.catalog import builtin_names, get_track
     from tracks.plot import plot_track
-    from tracks.raceline import CarLimits, centerline_profile, compute_racing_line
+    from tracks.raceline import centerline_profile, compute_racing_line
 
-    limits = CarLimits()
+    limits = car_limits()
     table = Table(title="Built-in tracks (physical-limit lap: the yardstick)")
     for column in ("track", "name", "length m", "width m", "limit lap s", "centre-line lap s"):
         table.add_column(column, justify="left" if column in ("track", "name") else "right")
@@ -105,7 +106,7 @@ def _create_league(data_dir: Path, round_interval_s: int) -> tuple[dict[str, str
 def _start(name: str, args: list[str], env: dict[str, str], logs: Path) -> subprocess.Popen:
     log = (logs / f"{name}.log").open("w")
     return subprocess.Popen(
-        [sys.executable, "-m", "league", "league", *args],
+        [sys.executable, "-m", "league", *args],
         env=env,
         stdout=log,
         stderr=subprocess.STDOUT,
@@ -187,8 +188,8 @@ def run_demo(
     timeout_s: float = 300.0,
 ) -> None:
     """Run the demo into folder ``out`` (see the module docstring)."""
+    from league.cli import standings_table
     from league.client import LeagueClient
-    from league.league_cli import standings_table
 
     console = Console()
     if not console.is_terminal:

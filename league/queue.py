@@ -1,21 +1,25 @@
-"""The job queue in the database: leasing, heartbeats, completion guards and lease expiry.
+"""The job queue in the database: queuing, leasing, heartbeats, completion and lease expiry.
 
 A lease is a conditional update: a job moves from ``queued`` to ``running`` only if it is
 still queued, so two workers can never both win it. On PostgreSQL the candidate row is also
 picked with ``SELECT ... FOR UPDATE SKIP LOCKED``, so workers do not queue up behind each
 other's locks; SQLite serialises writers, and the conditional update inside the
 transaction is enough there. Every lease gets a fresh owner token, so a worker whose lease
-expired (and whose job another worker took) can never heartbeat, finish or fail it.
+expired (and whose job another worker took) can never heartbeat, finish or fail it. A job
+becomes ``done`` only through :func:`claim_done`.
 """
 
 from __future__ import annotations
 
 import random
 import uuid
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import datetime, timedelta
+from typing import Any
 
 from sqlalchemy import ColumnElement, and_, select, update
+from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.exc import InterfaceError, OperationalError
 from sqlalchemy.orm import Session
 
@@ -50,6 +54,23 @@ class Backoff:
     def reset(self) -> None:
         """Back to the shortest wait after a success."""
         self.delay = 0.0
+
+
+def evaluation_jobs(event_id: int, entry_id: int, seeds: Iterable[int]) -> list[dict[str, Any]]:
+    """The job rows that evaluate one entry: one per seed of its event."""
+    return [
+        {"kind": "evaluation", "event_id": event_id, "entry_id": entry_id, "seed": seed}
+        for seed in seeds
+    ]
+
+
+def insert_jobs(session: Session, rows: list[dict[str, Any]]) -> int:
+    """Insert job rows, skipping any that already exist (unique keys); how many were new."""
+    if not rows:
+        return 0
+    dialect = postgresql if session.get_bind().dialect.name == "postgresql" else sqlite
+    statement = dialect.insert(Job).values(rows).on_conflict_do_nothing().returning(Job.id)
+    return len(session.execute(statement).all())
 
 
 def _owned(lease: Lease) -> ColumnElement[bool]:

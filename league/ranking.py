@@ -5,6 +5,10 @@ clock runs), so the ranking score is the metric itself: total time of the race's
 best lap or average lap, in ms. Cars that finished rank before those that did not; those
 rank by laps done, then distance. Each racer's best result counts. Head-to-head events rank
 by the conservative openskill rating (``ordinal = mu - 3 sigma``).
+
+The pure functions (:func:`standings`, :func:`rate`) know nothing of the database;
+:func:`leaderboard` and :func:`rate_race` read and write an event's stored results with
+them, and :func:`standing_row` is the one JSON form of a leaderboard row.
 """
 
 from __future__ import annotations
@@ -12,8 +16,14 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from openskill.models import PlackettLuce
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from league.crud import bump_results_version
+from league.models import Entry, Event, Model, Race, RaceCar, Racer, Rating
 
 METRIC_FIELD = {"total": "total_ms", "best": "best_ms", "average": "average_ms"}
 _MODEL = PlackettLuce()
@@ -141,3 +151,125 @@ def rate(skills: Sequence[Skill], finish_positions: Sequence[int]) -> list[Skill
             raise ValueError("rating update produced a non-finite value")
         out.append(Skill(new.mu, new.sigma, old.races + 1))
     return out
+
+
+def standing_row(standing: Standing) -> dict[str, Any]:
+    """A leaderboard row as plain JSON: the API's columns plus ``racer_id``.
+
+    The API's ``LeaderboardRow`` reads it (dropping ``racer_id``); the scheduler stores it
+    as an event's final standings.
+    """
+    r, skill = standing.result, standing.skill
+    return {
+        "rank": standing.rank,
+        "racer_id": r.racer_id,
+        "alias": r.alias,
+        "model_id": r.model_id,
+        "model_name": r.model_name,
+        "race_id": r.race_id,
+        "status": r.status,
+        "lap_count": r.laps,
+        "best_lap_ms": r.best_ms,
+        "average_lap_ms": r.average_ms,
+        "total_time_ms": r.total_ms,
+        "off_track_count": r.off_track_count,
+        "collision_count": r.crash_count,
+        "reset_count": r.reset_count,
+        "ranking_score_ms": standing.score_ms,
+        "submission_count": standing.submissions,
+        "mu": skill.mu if skill else None,
+        "sigma": skill.sigma if skill else None,
+        "ordinal": skill.ordinal if skill else None,
+    }
+
+
+def leaderboard(session: Session, event: Event) -> list[Standing]:
+    """The event's standings from its stored results, entries and ratings."""
+    rows = session.execute(
+        select(RaceCar, Race.id, Entry.racer_id, Racer.alias, Model.name)
+        .join(Race, RaceCar.race_id == Race.id)
+        .join(Entry, RaceCar.entry_id == Entry.id)
+        .join(Racer, Entry.racer_id == Racer.id)
+        .join(Model, Entry.model_id == Model.id)
+        .where(Race.event_id == event.id)
+    ).all()
+    results = [
+        Result(
+            racer_id=racer_id,
+            alias=alias,
+            model_id=car.model_id,
+            model_name=model_name,
+            race_id=race_id,
+            status=car.status,
+            laps=car.laps,
+            best_ms=car.best_ms,
+            average_ms=car.average_ms,
+            total_ms=car.total_ms,
+            off_track_count=car.off_track_count,
+            crash_count=car.crash_count,
+            reset_count=car.reset_count,
+            distance_m=car.distance_m,
+        )
+        for car, race_id, racer_id, alias, model_name in rows
+    ]
+    counts = dict(
+        session.execute(
+            select(Entry.racer_id, func.count(Entry.id))
+            .where(Entry.event_id == event.id)
+            .group_by(Entry.racer_id)
+        ).all()
+    )
+    skills = None
+    if event.race_type == "head_to_model":
+        skills = {
+            r.model_id: Skill(r.mu, r.sigma, r.races)
+            for r in session.scalars(select(Rating).where(Rating.event_id == event.id))
+        }
+        results += _unraced_entries(session, event, {r.model_id for r in results})
+    return standings(results, event.ranking_metric, counts, skills)
+
+
+def _unraced_entries(session: Session, event: Event, raced: set[int]) -> list[Result]:
+    """Head-to-head entries with no race yet, so that they show on the board."""
+    rows = session.execute(
+        select(Entry.racer_id, Entry.model_id, Racer.alias, Model.name)
+        .join(Racer, Entry.racer_id == Racer.id)
+        .join(Model, Entry.model_id == Model.id)
+        .where(Entry.event_id == event.id)
+    ).all()
+    return [
+        unraced(racer_id, alias, model_id, name)
+        for racer_id, model_id, alias, name in rows
+        if model_id not in raced
+    ]
+
+
+def rate_race(session: Session, race: Race) -> None:
+    """Update the head-to-head ratings of the models in ``race`` (Plackett-Luce).
+
+    Joins the caller's transaction (the worker's result transaction); does not commit.
+    """
+    cars = [c for c in race.cars if c.model_id is not None]
+    if len(cars) < 2:
+        return
+    held = {
+        r.model_id: r
+        for r in session.scalars(
+            select(Rating).where(
+                Rating.event_id == race.event_id, Rating.model_id.in_([c.model_id for c in cars])
+            )
+        )
+    }
+    start = initial_skill()
+    skills = [
+        Skill(held[c.model_id].mu, held[c.model_id].sigma, held[c.model_id].races)
+        if c.model_id in held
+        else start
+        for c in cars
+    ]
+    updated = rate(skills, [c.finish_position for c in cars])
+    for car, skill in zip(cars, updated, strict=True):
+        row = held.get(car.model_id) or Rating(event_id=race.event_id, model_id=car.model_id)
+        row.mu, row.sigma, row.races = skill.mu, skill.sigma, skill.races
+        session.add(row)
+    bump_results_version(session, race.event_id)

@@ -29,7 +29,7 @@ _MEMORY_WORDS = ("MemoryError", "bad_alloc", "bad allocation", "Failed to alloca
 
 
 @dataclass(frozen=True)
-class Limits:
+class SandboxLimits:
     """What one child may use: extra address space, CPU seconds, wall seconds, answer size."""
 
     memory_mb: int = 1024
@@ -56,7 +56,7 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
-def _child(target: Callable[[], Any], fd: int, limits: Limits) -> None:
+def _child(target: Callable[[], Any], fd: int, limits: SandboxLimits) -> None:
     """Child side: limits on, run ``target``, write ``{"ok": ...}`` or ``{"error": ...}``."""
     try:
         faulthandler.disable()  # a crash is reported by the parent, not as a stack dump
@@ -84,7 +84,7 @@ def _child(target: Callable[[], Any], fd: int, limits: Limits) -> None:
         os._exit(0)
 
 
-def _read(fd: int, pid: int, limits: Limits, tick: Callable[[], None] | None) -> bytes:
+def _read(fd: int, pid: int, limits: SandboxLimits, tick: Callable[[], None] | None) -> bytes:
     """Collect the child's answer until EOF; SIGKILL it on the wall limit or a tick error."""
     deadline = time.monotonic() + limits.wall_seconds
     chunks, size = [], 0
@@ -113,7 +113,7 @@ def _read(fd: int, pid: int, limits: Limits, tick: Callable[[], None] | None) ->
         raise
 
 
-def _verdict(status: int, data: bytes, limits: Limits) -> Any:
+def _verdict(status: int, data: bytes, limits: SandboxLimits) -> Any:
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         if sig == signal.SIGXCPU:
@@ -147,7 +147,7 @@ def _verdict(status: int, data: bytes, limits: Limits) -> Any:
 
 
 def run_limited(
-    target: Callable[[], Any], limits: Limits, tick: Callable[[], None] | None = None
+    target: Callable[[], Any], limits: SandboxLimits, tick: Callable[[], None] | None = None
 ) -> Any:
     """Run ``target()`` in a forked child under ``limits``; return its JSON-decoded answer.
 

@@ -15,31 +15,19 @@ import random
 import signal
 import time
 from datetime import datetime, timedelta
-from typing import Any
 
 from sqlalchemy import func, select, update
-from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.orm import Session
 
-from league import crud
 from league.db import make_engine, make_session_factory
 from league.matchmaking import Candidate, plan_round
 from league.models import Entry, Event, Job, Rating, utcnow
-from league.queue import DB_ERRORS, Backoff, expire_leases
-from league.ranking import Standing, initial_skill
+from league.queue import DB_ERRORS, Backoff, evaluation_jobs, expire_leases, insert_jobs
+from league.ranking import initial_skill, leaderboard, standing_row
 from league.settings import Settings
 
 log = logging.getLogger("slipstream.scheduler")
 ROUND_SEED_STRIDE = 1000
-
-
-def insert_jobs(session: Session, rows: list[dict[str, Any]]) -> int:
-    """Insert job rows, skipping any that already exist (unique keys); how many were new."""
-    if not rows:
-        return 0
-    dialect = postgresql if session.get_bind().dialect.name == "postgresql" else sqlite
-    statement = dialect.insert(Job).values(rows).on_conflict_do_nothing().returning(Job.id)
-    return len(session.execute(statement).all())
 
 
 def queue_evaluations(session: Session) -> int:
@@ -51,9 +39,9 @@ def queue_evaluations(session: Session) -> int:
         .where(Event.race_type != "head_to_model", Job.id.is_(None))
     ).all()
     rows = [
-        {"kind": "evaluation", "event_id": event_id, "entry_id": entry_id, "seed": seed}
+        row
         for entry_id, event_id, seeds in pending
-        for seed in seeds
+        for row in evaluation_jobs(event_id, entry_id, seeds)
     ]
     added = insert_jobs(session, rows)
     session.commit()
@@ -139,32 +127,6 @@ def due_rounds(session: Session, now: datetime, settings: Settings) -> int:
     return sum(start_round(session, e, now, settings) for e in events if e.is_open(now))
 
 
-def standing_row(standing: Standing) -> dict[str, Any]:
-    """A leaderboard row as plain JSON for the final snapshot."""
-    r, skill = standing.result, standing.skill
-    return {
-        "rank": standing.rank,
-        "racer_id": r.racer_id,
-        "alias": r.alias,
-        "model_id": r.model_id,
-        "model_name": r.model_name,
-        "race_id": r.race_id,
-        "status": r.status,
-        "lap_count": r.laps,
-        "best_lap_ms": r.best_ms,
-        "average_lap_ms": r.average_ms,
-        "total_time_ms": r.total_ms,
-        "off_track_count": r.off_track_count,
-        "collision_count": r.crash_count,
-        "reset_count": r.reset_count,
-        "ranking_score_ms": standing.score_ms,
-        "submission_count": standing.submissions,
-        "mu": skill.mu if skill else None,
-        "sigma": skill.sigma if skill else None,
-        "ordinal": skill.ordinal if skill else None,
-    }
-
-
 def close_events(session: Session, now: datetime) -> int:
     """Snapshot the standings of closed events whose jobs have all settled; how many."""
     events = session.scalars(
@@ -181,7 +143,7 @@ def close_events(session: Session, now: datetime) -> int:
         )
         if busy is not None:
             continue
-        rows = [standing_row(s) for s in crud.leaderboard(session, event)]
+        rows = [standing_row(s) for s in leaderboard(session, event)]
         done = session.execute(
             update(Event)
             .where(Event.id == event.id, Event.finalized_at.is_(None))

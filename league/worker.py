@@ -19,16 +19,17 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from arena.race import RaceResult, run_race
 from league import crud
 from league.db import make_engine, make_session_factory
 from league.evaluation import RacePlan, build_plan, policies
-from league.models import Entry, Event, Job
+from league.models import Entry, Event, Job, Race
 from league.queue import (
     DB_ERRORS,
     Backoff,
@@ -39,7 +40,8 @@ from league.queue import (
     heartbeat,
     lease_job,
 )
-from league.sandbox import Limits, SandboxError, run_limited
+from league.ranking import rate_race
+from league.sandbox import SandboxError, SandboxLimits, run_limited
 from league.settings import Settings
 from league.storage import Storage
 
@@ -56,6 +58,34 @@ def race_answer(plan: RacePlan) -> dict[str, Any]:
     return run_race(plan.config, policies(plan), record_trace=True).to_dict()
 
 
+def record_result(
+    session: Session,
+    storage: Storage,
+    lease: Lease,
+    result: RaceResult,
+    entry_ids: Mapping[str, int],
+) -> Race | None:
+    """Store a leased job's race, its cars, trace and ratings in one transaction; commit.
+
+    The transaction begins by marking the job done if ``lease`` still holds it
+    (:func:`league.queue.claim_done`); if it does not, nothing is written and the answer
+    is None. ``entry_ids`` maps the race's car names to the entries that drove them.
+    """
+    if not claim_done(session, lease):
+        session.rollback()
+        return None
+    job = session.get_one(Job, lease.job_id)
+    event = session.execute(
+        select(Event).where(Event.id == job.event_id).with_for_update()
+    ).scalar_one()
+    entries = {name: session.get_one(Entry, entry_id) for name, entry_id in entry_ids.items()}
+    race = crud.record_race(session, storage, event, result, entries, job_id=job.id, commit=False)
+    if event.race_type == "head_to_model":
+        rate_race(session, race)
+    session.commit()
+    return race
+
+
 class Worker:
     """One evaluation worker bound to a database and a file store."""
 
@@ -65,7 +95,7 @@ class Worker:
         self.engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
         self.sessions = make_session_factory(self.engine)
         self.storage = Storage(settings.storage_dir)
-        self.limits = Limits(
+        self.limits = SandboxLimits(
             memory_mb=settings.race_memory_mb,
             cpu_seconds=settings.race_cpu_seconds,
             wall_seconds=settings.race_wall_seconds,
@@ -131,27 +161,13 @@ class Worker:
         except (KeyError, TypeError, ValueError) as exc:
             self._fail(holder[0], f"error: the race answer was malformed ({exc})")
             return
-        if self._retry_db(lambda s: self.record(s, holder[0], plan, result)):
+        entry_ids = {car.name: car.entry_id for car in plan.cars if car.entry_id}
+        if self._retry_db(
+            lambda s: record_result(s, self.storage, holder[0], result, entry_ids) is not None
+        ):
             log.info("job %d done", lease.job_id)
         else:
             log.warning("job %d: lease lost before recording; result dropped", lease.job_id)
-
-    def record(self, session: Any, lease: Lease, plan: RacePlan, result: RaceResult) -> bool:
-        """Store the race, its cars, trace and ratings in one transaction, once per job."""
-        if not claim_done(session, lease):
-            session.rollback()
-            return False
-        job = session.get_one(Job, lease.job_id)
-        event = session.execute(
-            select(Event).where(Event.id == job.event_id).with_for_update()
-        ).scalar_one()
-        entries = {c.name: session.get_one(Entry, c.entry_id) for c in plan.cars if c.entry_id}
-        race = crud.record_race(session, self.storage, event, result, entries, commit=False)
-        race.job_id = job.id
-        if event.race_type == "head_to_model":
-            crud.rate_race(session, race, commit=False)
-        session.commit()
-        return True
 
     def _fail(self, lease: Lease, error: str) -> None:
         """Fail the job for good: a race that cannot run will not run on a retry either."""

@@ -1,17 +1,42 @@
-"""The root ``slipstream`` command's race, through Typer's runner (demo: test_demo.py)."""
+"""The root ``slipstream`` command: what it mounts, and its race (demo: test_demo.py)."""
 
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import imageio.v2 as imageio
 import pytest
 from typer.testing import CliRunner
 
-from league.cli import app
+from slipstream.cli import app
 
 runner = CliRunner()
+GROUPS = {"tracks": "list", "model": "validate", "league": "serve"}
+COMMANDS = ("race", "train", "evaluate", "demo")
+
+
+def test_the_root_command_mounts_every_package() -> None:
+    top = runner.invoke(app, ["--help"])
+    assert top.exit_code == 0, top.output
+    for name in (*GROUPS, *COMMANDS):
+        assert name in top.output
+    for group, command in GROUPS.items():
+        inner = runner.invoke(app, [group, "--help"])
+        assert inner.exit_code == 0 and command in inner.output, inner.output
+
+
+@pytest.mark.parametrize(
+    ("module", "shown"), [("slipstream", "league"), ("league", "create-racer")]
+)
+def test_python_dash_m_runs_the_commands(module: str, shown: str) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    assert shown in done.stdout
 
 
 @pytest.mark.slow

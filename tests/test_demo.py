@@ -22,7 +22,7 @@ def test_demo_runs_entries_to_leaderboards(tmp_path: Path) -> None:
     port = _free_port()
     args = ["demo", "--out", str(tmp_path), "--port", str(port), "--no-serve", "--timeout", "240"]
     done = subprocess.run(
-        [sys.executable, "-m", "league", *args],
+        [sys.executable, "-m", "slipstream", *args],
         capture_output=True,
         text=True,
         timeout=420,

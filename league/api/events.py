@@ -13,7 +13,7 @@ from league import crud
 from league.api.deps import SessionDep
 from league.auth import AdminRacer, CurrentRacer
 from league.models import Event, Model, utcnow
-from league.ranking import Standing
+from league.ranking import leaderboard, standing_row
 from league.schemas import (
     MAX_ID,
     EntryAccepted,
@@ -111,30 +111,6 @@ class LeaderboardCache:
             self._items[event_id] = (version, body)
 
 
-def _row(standing: Standing) -> LeaderboardRow:
-    r, skill = standing.result, standing.skill
-    return LeaderboardRow(
-        rank=standing.rank,
-        alias=r.alias,
-        model_id=r.model_id,
-        model_name=r.model_name,
-        race_id=r.race_id,
-        status=r.status,
-        lap_count=r.laps,
-        best_lap_ms=r.best_ms,
-        average_lap_ms=r.average_ms,
-        total_time_ms=r.total_ms,
-        off_track_count=r.off_track_count,
-        collision_count=r.crash_count,
-        reset_count=r.reset_count,
-        ranking_score_ms=standing.score_ms,
-        submission_count=standing.submissions,
-        mu=skill.mu if skill else None,
-        sigma=skill.sigma if skill else None,
-        ordinal=skill.ordinal if skill else None,
-    )
-
-
 def _results_version(request: Request, event_id: int) -> int | None:
     with request.app.state.engine.connect() as connection:
         query = select(Event.results_version).where(Event.id == event_id)
@@ -144,11 +120,12 @@ def _results_version(request: Request, event_id: int) -> int | None:
 def _build_leaderboard(request: Request, event_id: int) -> tuple[int, bytes]:
     with request.app.state.session_factory() as session:
         event = get_event(session, event_id)
+        standings = leaderboard(session, event)
         board = Leaderboard(
             event_id=event.id,
             race_type=event.race_type,
             ranking_metric=event.ranking_metric,
-            rows=[_row(s) for s in crud.leaderboard(session, event)],
+            rows=[LeaderboardRow.model_validate(standing_row(s)) for s in standings],
         )
         return event.results_version, board.model_dump_json().encode()
 

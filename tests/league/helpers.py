@@ -6,12 +6,16 @@ from pathlib import Path
 from typing import Any
 
 from sqlalchemy import func, select
+from sqlalchemy.orm import Session
 
 from arena.config import RaceConfig
 from arena.race import CarResult, RaceResult
-from league import crud
-from league.models import Entry, Event, Job, Model
+from league.models import Event, Job, Model
+from league.queue import Lease, lease_job, release
+from league.worker import record_result
 from tests.league.conftest import League, make_model_zip
+
+LEASE_S = 60.0
 
 
 def upload(league: League, who: str, seed: int, name: str | None = None) -> dict[str, Any]:
@@ -77,20 +81,55 @@ def race_result(event: Event, cars: list[CarResult], seed: int = 0) -> RaceResul
     )
 
 
-def record(league: League, event_id: int, cars: dict[int, CarResult], seed: int = 0) -> int:
-    """Store a race of the entries ``{entry_id: car}`` (marking their job done); its id."""
+def lease(session: Session, job_id: int) -> Lease:
+    """Lease job ``job_id`` from the queue as a worker does (older jobs go back untouched)."""
+    passed = []
+    while (held := lease_job(session, "tests", LEASE_S)) is not None and held.job_id != job_id:
+        passed.append(held)
+    for other in passed:
+        release(session, other)
+    assert held is not None, f"job {job_id} is not queued"
+    return held
+
+
+def round_job(session: Session, event_id: int, entry_ids: list[int], seed: int) -> int:
+    """Queue a head-to-model round job racing ``entry_ids``, as the scheduler does; its id."""
+    last = session.scalar(select(func.max(Job.round)).where(Job.event_id == event_id))
+    lineup = [{"entry_id": entry_id} for entry_id in entry_ids]
+    job = Job(kind="round", event_id=event_id, round=(last or 0) + 1, seed=seed, lineup=lineup)
+    session.add(job)
+    session.commit()
+    return job.id
+
+
+def record_as_worker(
+    league: League, event_id: int, result: RaceResult, entry_ids: dict[str, int]
+) -> int:
+    """Store ``result`` the way a worker does, through a leased job; the race id.
+
+    A one-entry race is its entry's evaluation job for the result's seed; a race of several
+    entries is a new round job. ``entry_ids`` maps car names to entries.
+    """
     with league.sessions() as session:
-        event = session.get(Event, event_id)
-        entries = {c.name: session.get(Entry, entry_id) for entry_id, c in cars.items()}
-        job = None
-        if len(cars) == 1:
-            (entry_id,) = cars
-            job = session.scalar(select(Job).where(Job.entry_id == entry_id, Job.seed == seed))
-        result = race_result(event, list(cars.values()), seed)
-        race = crud.record_race(session, league.storage, event, result, entries, job)
-        if event.race_type == "head_to_model":
-            crud.rate_race(session, race)
+        if len(entry_ids) == 1:
+            (entry_id,) = entry_ids.values()
+            seed = result.config.seed
+            query = select(Job.id).where(Job.entry_id == entry_id, Job.seed == seed)
+            job_id = session.scalar(query)
+        else:
+            job_id = round_job(session, event_id, list(entry_ids.values()), result.config.seed)
+        race = record_result(session, league.storage, lease(session, job_id), result, entry_ids)
+        assert race is not None
         return race.id
+
+
+def record(league: League, event_id: int, cars: dict[int, CarResult], seed: int = 0) -> int:
+    """Store a race of the entries ``{entry_id: car}`` through its job (as a worker); its id."""
+    with league.sessions() as session:
+        event = session.get_one(Event, event_id)
+        result = race_result(event, list(cars.values()), seed)
+    entry_ids = {car.name: entry_id for entry_id, car in cars.items()}
+    return record_as_worker(league, event_id, result, entry_ids)
 
 
 def model_rows(league: League) -> int:

@@ -6,7 +6,7 @@ import json
 
 from typer.testing import CliRunner
 
-from league.league_cli import app
+from league.cli import app
 from tests.league.conftest import League, make_model_zip
 
 runner = CliRunner()

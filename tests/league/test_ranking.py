@@ -1,10 +1,11 @@
-"""Ranking and ratings as pure functions (no server)."""
+"""Ranking and ratings as pure functions (no server), and the one leaderboard row shape."""
 
 from __future__ import annotations
 
 import pytest
 
-from league.ranking import Result, Skill, initial_skill, rate, standings
+from league.ranking import Result, Skill, initial_skill, rate, standing_row, standings
+from league.schemas import LeaderboardRow
 
 
 def result(racer: int, model: int, status: str = "finished", laps: int = 3, **ms: int) -> Result:
@@ -64,3 +65,15 @@ def test_rate_rewards_the_winner() -> None:
     assert first.sigma < start.sigma
     with pytest.raises(ValueError, match="two or more"):
         rate([start], [1])
+
+
+def test_one_row_shape_for_the_api_and_the_final_snapshot() -> None:
+    (rated,) = standings([result(1, 7, total_ms=30000)], "total", {1: 2}, {7: Skill(30.0, 2.0)})
+    row = standing_row(rated)
+    assert set(row) == set(LeaderboardRow.model_fields) | {"racer_id"}
+    assert row["racer_id"] == 1 and row["lap_count"] == 3 and row["submission_count"] == 2
+    assert row["ranking_score_ms"] == 30000 and row["ordinal"] == pytest.approx(24.0)
+    api = LeaderboardRow.model_validate(row).model_dump()
+    assert api == {k: v for k, v in row.items() if k != "racer_id"}
+    (unrated,) = standings([result(2, 8, status="dnf", total_ms=None)], "total", {})
+    assert standing_row(unrated)["mu"] is None and standing_row(unrated)["ranking_score_ms"] is None

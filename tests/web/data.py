@@ -6,18 +6,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import select
-
 from arena.actions import default_discrete_space
-from arena.config import RaceConfig
+from arena.config import RaceConfig, resolve_track
 from arena.drivers import LaneFollowerPolicy, nearest_action
-from arena.env import resolve_track
 from arena.race import RaceResult, run_race
 from league import crud
-from league.models import Entry, Event, Job
+from league.models import Event
 from submissions import pack
 from tests.league.conftest import CREATED_AT, League, policy_onnx
-from tests.league.helpers import create_event, enter, upload
+from tests.league.helpers import create_event, enter, record_as_worker, upload
 
 METRICS_CSV = "iteration,mean_reward,mean_progress,eval_progress\n" + "".join(
     f"{i},{10 + 4 * i},{min(100, 8 * i)},{'' if i % 3 else min(100, 9 * i)}\n" for i in range(13)
@@ -68,18 +65,8 @@ def race(event: Event, drivers: dict[str, tuple[float, int | None]], seed: int) 
 
 
 def record(league: League, event_id: int, result: RaceResult, entries: dict[str, int]) -> int:
-    """Store a race (its single entry's job marked done; head-to-head races rated)."""
-    with league.sessions() as session:
-        event = session.get(Event, event_id)
-        rows = {name: session.get(Entry, entry_id) for name, entry_id in entries.items()}
-        job = None
-        if len(entries) == 1:
-            (entry_id,) = entries.values()
-            job = session.scalar(select(Job).where(Job.entry_id == entry_id))
-        stored = crud.record_race(session, league.storage, event, result, rows, job)
-        if event.race_type == "head_to_model":
-            crud.rate_race(session, stored)
-        return stored.id
+    """Store a race through its job, as a worker does (head-to-head races rated)."""
+    return record_as_worker(league, event_id, result, entries)
 
 
 def model_with_metrics(folder: Path) -> Path:

@@ -1,0 +1,5 @@
+"""``python -m slipstream ...`` runs the ``slipstream`` command."""
+
+from slipstream.cli import app
+
+app()
