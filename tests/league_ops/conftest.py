@@ -1,8 +1,9 @@
 """Fixtures for the scheduler / worker reliability tests: a fresh database per test.
 
 SQLite always; PostgreSQL too when ``SLIPSTREAM_TEST_POSTGRES_URL`` is set (a fresh schema
-per test, dropped afterwards). Worker and scheduler processes are real ``python -m``
-processes pointed at the same database through ``SLIPSTREAM_*`` variables.
+per test, dropped afterwards; without it that variant skips, or fails under ``CI=true``).
+Worker and scheduler processes are real ``python -m`` processes pointed at the same
+database through ``SLIPSTREAM_*`` variables.
 """
 
 from __future__ import annotations
@@ -22,8 +23,8 @@ from league.db import make_engine, make_session_factory, scratch_schema
 from league.migrations import upgrade
 from league.settings import Settings
 from league.storage import Storage
+from tests.prerequisites import postgres_url
 
-POSTGRES_ENV = "SLIPSTREAM_TEST_POSTGRES_URL"
 ROOT = Path(__file__).resolve().parents[2]
 FAST = {"lease_seconds": 2.0, "poll_seconds": 0.2, "sqlite_busy_timeout_ms": 2000}
 
@@ -71,10 +72,7 @@ def ops(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Ops]:
     """A migrated, empty database and data directory; started processes are killed after."""
     drop = None
     if request.param == "postgres":
-        base = os.environ.get(POSTGRES_ENV)
-        if not base:
-            pytest.skip(f"PostgreSQL variant skipped: set {POSTGRES_ENV} to run it")
-        url, drop = scratch_schema(base, "league_ops")
+        url, drop = scratch_schema(postgres_url(), "league_ops")
     else:
         url = f"sqlite:///{tmp_path / 'league.db'}"
     data_dir = tmp_path / "data"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+import re
 import signal
 import time
 from collections import Counter
@@ -66,6 +67,33 @@ def test_rounds_rate_models_and_closing_writes_standings(ops: Ops) -> None:
     assert all(row["sigma"] < 25 / 3 and row["ordinal"] is not None for row in final)
 
 
+def _until_both_ticked(ops: Ops, trial: Event, names: list[str]) -> int:
+    """Enter late models into ``trial`` one at a time until every scheduler has queued the
+    jobs of one; how many were entered.
+
+    A scheduler logs a tick only when it did something, so a late entry is what makes a
+    tick visible: whoever logs ``evaluation_jobs 3`` (this event's 3 seeds; the first
+    entries made 18) ticked after all the first jobs existed, over the same rows as the
+    other. Which scheduler takes an entry is chance; a few entries are enough.
+    """
+    picked_up = re.compile(r"tick: evaluation_jobs 3\b")
+
+    def late_ticks() -> list[int]:
+        return [len(picked_up.findall(ops.log(name))) for name in names]
+
+    deadline = time.monotonic() + 60
+    late = 0
+    while not all(late_ticks()):
+        assert time.monotonic() < deadline, f"late entries picked up per scheduler: {late_ticks()}"
+        late += 1
+        md = model(ops, racer(ops, f"late{late}"), seed=100 + late)
+        with ops.sessions() as session:
+            session.add(Entry(event_id=trial.id, model_id=md.id, racer_id=md.owner_id))
+            session.commit()
+        wait_until(lambda n=late: sum(late_ticks()) >= n, 30, f"the jobs of late entry {late}")
+    return late
+
+
 def test_two_scheduler_daemons_make_no_duplicate_jobs(ops: Ops) -> None:
     trial = event(ops, seeds=[0, 1, 2])
     h2h = event(ops, race_type="head_to_model", round_interval_s=60, seeds=[0])
@@ -79,16 +107,19 @@ def test_two_scheduler_daemons_make_no_duplicate_jobs(ops: Ops) -> None:
     start = initial_skill()
     field = [Candidate(i, start.mu, start.sigma) for i in sorted(ids)]
     expected = plan_round(field, 2, 4, random.Random(f"{h2h.id}:1"))
-    procs = [ops.start("scheduler", f"scheduler{i}", poll_seconds=0.05) for i in range(2)]
+    # Different periods, so that neither always ticks just before the other.
+    polls = {"scheduler0": 0.05, "scheduler1": 0.08}
+    names = list(polls)
+    procs = [ops.start("scheduler", name, poll_seconds=poll) for name, poll in polls.items()]
     wait_until(lambda: statuses(ops).get("queued", 0) >= 18 + len(expected), 30, "jobs")
-    time.sleep(1.0)  # both keep ticking over the same rows
+    late = _until_both_ticked(ops, trial, names)
     for proc in procs:
         proc.send_signal(signal.SIGTERM)
     assert [proc.wait(timeout=10) for proc in procs] == [0, 0]
     with ops.sessions() as session:
         jobs = session.scalars(select(Job)).all()
     evaluations = Counter((j.entry_id, j.seed) for j in jobs if j.kind == "evaluation")
-    assert len(evaluations) == 18 and set(evaluations.values()) == {1}
+    assert len(evaluations) == 3 * (6 + late) and set(evaluations.values()) == {1}
     rounds = [j for j in jobs if j.kind == "round"]
     assert {j.round for j in rounds} == {1}  # one round, planned once
     assert [j.lineup for j in sorted(rounds, key=lambda j: j.seed)] == expected

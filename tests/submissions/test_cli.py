@@ -1,4 +1,4 @@
-"""The ``slipstream model`` Typer app: validate, info and the honest pre-flight stub."""
+"""The ``slipstream model`` Typer app: validate, info and the one-lap pre-flight."""
 
 from __future__ import annotations
 
@@ -64,17 +64,35 @@ def test_info_on_garbage(tmp_path: Path) -> None:
 
 
 def test_preflight_races_one_lap_and_reports(good: Path) -> None:
+    """A valid model exits 0 whatever its pre-flight result; this one runs out of time.
+
+    ``good`` is a random-weight lidar MLP. Alone on a track with no walls its lidar sees
+    nothing, so its observation never changes and neither does its action (action 1: full
+    lock at 0.8 m/s). It circles off the road again and again and is out of time (90 s)
+    with no lap.
+    """
     result = runner.invoke(
         app, ["validate", str(good), "--json", "--preflight", "--track", "beginner_loop"]
     )
     assert result.exit_code == 0, result.output
     flight = json.loads(result.output)["preflight"]
     assert flight["track"] == "beginner_loop" and flight["laps"] == 1
-    assert flight["status"] in ("finished", "time_up", "dnf")
-    assert flight["laps_completed"] == len(flight["lap_times"])
+    assert flight["status"] == "time_up"
+    assert flight["laps_completed"] == 0 and flight["lap_times"] == []
+    assert flight["best_lap"] is None and flight["crash_count"] == 0
+    assert flight["off_track_count"] >= 1 and flight["reset_count"] >= flight["off_track_count"]
     text = runner.invoke(app, ["validate", str(good), "--preflight", "--track", "beginner_loop"])
-    assert "pre-flight on beginner_loop" in text.output
+    assert text.exit_code == 0
+    assert "pre-flight on beginner_loop: did NOT finish (time_up); 0/1 laps" in text.output
     unknown = runner.invoke(app, ["validate", str(good), "--preflight", "--track", "nowhere"])
     assert unknown.exit_code == 1 and "nowhere" in unknown.output
     missing_track = runner.invoke(app, ["validate", str(good), "--preflight"])
     assert missing_track.exit_code == 2
+
+
+def test_preflight_of_a_refused_file_races_nothing(bad: Path) -> None:
+    result = runner.invoke(
+        app, ["validate", str(bad), "--json", "--preflight", "--track", "beginner_loop"]
+    )
+    assert result.exit_code == 1
+    assert "preflight" not in json.loads(result.output)

@@ -185,6 +185,13 @@ def _multi_sensor_graph() -> onnx.ModelProto:
     return model(nodes, inputs, outputs, [tensor("w", w), tensor("b", np.zeros(2, np.float32))])
 
 
+def _multi_sensor_reference(obs: dict[str, np.ndarray]) -> np.ndarray:
+    """What ``_multi_sensor_graph`` computes, in numpy (b is zero)."""
+    w = np.linspace(-0.01, 0.01, 20, dtype=np.float32).reshape(10, 2)
+    camera_means = obs["stereo"].astype(np.float32).mean(axis=(0, 1))
+    return np.tanh(np.concatenate([camera_means, obs["sector_lidar"]]) @ w)
+
+
 def test_multi_sensor_policy_acts() -> None:
     archive = pack_bytes(_multi_sensor_graph(), ContinuousActionSpace(), ("stereo", "sector_lidar"))
     policy = load_policy(archive)
@@ -192,9 +199,13 @@ def test_multi_sensor_policy_acts() -> None:
     meta = json.loads(zipfile.ZipFile(io.BytesIO(archive)).read("model_metadata.json"))
     assert meta["sensor"] == ["STEREO_CAMERAS", "SECTOR_LIDAR"]
     assert [i["name"] for i in meta["slipstream"]["observation"]] == ["stereo", "sector_lidar"]
+    actions = []
     for obs in _observations(("stereo", "sector_lidar"), 5):
         action = policy.act(obs)
-        assert action.dtype == np.float32 and np.all(np.abs(action) <= 1.0)
+        assert action.dtype == np.float32 and action.shape == (2,)
+        np.testing.assert_allclose(action, _multi_sensor_reference(obs), rtol=1e-5, atol=1e-6)
+        actions.append(action)
+    assert len({a.tobytes() for a in actions}) == len(actions)  # each input gives its own
 
 
 def test_pack_refuses_bad_parts(tmp_path: Path) -> None:

@@ -1,8 +1,9 @@
 """Web test fixtures: one league server with real races for the whole package, and a
 headless Chromium (Debian's ``/usr/bin/chromium`` driven by Playwright).
 
-Browser tests skip with a message when Chromium or Playwright is missing; the page tests
-that need no browser always run.
+Browser tests skip with a message when Chromium or Playwright is missing, and fail instead
+under ``CI=true`` (see ``tests.prerequisites``); the page tests that need no browser always
+run.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from tests.league.conftest import Database, League, start_league
+from tests.prerequisites import skip_or_fail
 from tests.web.data import Site, populate
 
 CHROMIUM = os.environ.get("SLIPSTREAM_CHROMIUM", "/usr/bin/chromium")
@@ -47,15 +49,13 @@ def site(league: League) -> Site:
 
 @pytest.fixture(scope="package")
 def browser() -> Iterator[object]:
-    """Headless Chromium, or a skip that says what is missing."""
+    """Headless Chromium, or a skip (a failure under ``CI=true``) that says what is missing."""
     if not Path(CHROMIUM).exists() and shutil.which("chromium") is None:
-        pytest.skip(
-            f"browser tests skipped: Chromium not found at {CHROMIUM} (apt-get install chromium)"
-        )
+        skip_or_fail(f"browser tests: Chromium not found at {CHROMIUM} (apt-get install chromium)")
     try:
         from playwright.sync_api import sync_playwright
     except ImportError:
-        pytest.skip("browser tests skipped: the 'playwright' Python package is not installed")
+        skip_or_fail("browser tests: the 'playwright' Python package is not installed")
     executable = CHROMIUM if Path(CHROMIUM).exists() else shutil.which("chromium")
     with sync_playwright() as playwright:
         chromium = playwright.chromium.launch(executable_path=executable, args=CHROMIUM_ARGS)
