@@ -110,6 +110,40 @@ class PhysicsConfig(_Frozen):
         return self
 
 
+class SeedVariation(_Frozen):
+    """What a race's seed varies, and by how much: what a real start varies.
+
+    Races only: a training episode starts on its grid slot as DeepRacer's training does,
+    with commands applied as given. Jitter is uniform within the bounds; noise is
+    Gaussian, drawn afresh every step from each car's own stream.
+    """
+
+    start_jitter_m: float = Field(default=0.05, ge=0.0, le=0.2)
+    """Largest shift of a car's start position, along and across the track."""
+    start_jitter_deg: float = Field(default=3.0, ge=0.0, le=10.0)
+    """Largest turn of a car's start heading."""
+    shuffle_grid: bool = True
+    """Head-to-model: cars take the slots in an order drawn by name; the front lane is drawn."""
+    steering_noise_deg: float = Field(default=1.0, ge=0.0, le=10.0)
+    """Standard deviation of the noise added to each commanded steering angle."""
+    speed_noise_frac: float = Field(default=0.02, ge=0.0, le=0.5)
+    """Standard deviation of the noise on each commanded speed, as a fraction of it."""
+
+    @property
+    def has_actuation_noise(self) -> bool:
+        """Whether commands are perturbed at all."""
+        return self.steering_noise_deg > 0.0 or self.speed_noise_frac > 0.0
+
+
+NO_VARIATION = SeedVariation(
+    start_jitter_m=0.0,
+    start_jitter_deg=0.0,
+    shuffle_grid=False,
+    steering_noise_deg=0.0,
+    speed_noise_frac=0.0,
+)
+
+
 class RaceConfig(_Frozen):
     """Everything that decides a race: track, rules, cars and seed."""
 
@@ -127,6 +161,7 @@ class RaceConfig(_Frozen):
     physics: PhysicsConfig = PhysicsConfig()
     start_offset_pct: float = Field(default=0.0, ge=0.0, lt=100.0)
     training_start_step_pct: float = Field(default=5.0, ge=0.0, lt=100.0)
+    variation: SeedVariation = SeedVariation()
     seed: int = Field(default=0, ge=0, lt=2**63)
 
     @model_validator(mode="after")
@@ -181,6 +216,11 @@ class RaceConfig(_Frozen):
         return hashlib.sha256(text.encode()).hexdigest()
 
     @property
+    def active_variation(self) -> SeedVariation:
+        """What the seed varies in this config's mode: ``variation`` in races, none in training."""
+        return self.variation if self.mode == "race" else NO_VARIATION
+
+    @property
     def control_dt(self) -> float:
         """Seconds of simulated time per control step."""
         return 1.0 / self.physics.control_hz
@@ -216,6 +256,7 @@ def describe_validation_error(exc: ValidationError) -> str:
 
 __all__ = [
     "MAX_CARS",
+    "NO_VARIATION",
     "BotConfig",
     "CarConfig",
     "ConfigError",
@@ -224,5 +265,6 @@ __all__ = [
     "Penalties",
     "PhysicsConfig",
     "RaceConfig",
+    "SeedVariation",
     "resolve_track",
 ]

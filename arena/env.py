@@ -3,15 +3,17 @@
 One PyBullet DIRECT client per env; the world is rebuilt on every ``reset`` so that a
 (config, seed, actions) triple always gives the same trajectory. Each control step:
 actions become steering and wheel-speed commands, physics runs its substeps, the
-rules judge every car (see :mod:`arena.rules`), penalised cars are frozen and then
-respawned (race mode), and each car gets its sensors' observation, its reward from
-its ``reward_function(params)`` and an info dict carrying the DeepRacer ``params``.
+rules judge every car (see :mod:`arena.rules`) and each car gets its sensors'
+observation, its reward from its ``reward_function(params)`` and an info dict carrying
+the DeepRacer ``params``, all from that one world state; only then are penalised cars
+respawned and held, and served ones released (race mode), for the next step.
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -34,15 +36,20 @@ from arena.lidar import (
 )
 from arena.params import ObjectsView, build_params, check_reward
 from arena.rewards import follow_center_line
-from arena.rules import CarRecord, EpisodeStatus, Measurement, RuleBook
+from arena.rules import REJOIN_S, CarRecord, ContactParty, EpisodeStatus, Measurement, RuleBook
 from arena.sensors_spec import IMAGE_SENSORS, observation_space
 from arena.spawn import (
+    RESPAWN_CLEARANCE_M,
     Placement,
     bot_places,
+    car_footprint,
     car_grid,
+    grid_slots,
     obstacle_places,
     other_lane,
+    rectangle,
     respawn_place,
+    room_around,
     start_arc,
 )
 from tracks.track import Projection
@@ -61,9 +68,22 @@ CAR_COLORS = [
 BOT_COLOR = (0.15, 0.15, 0.15, 1.0)
 CAR_GRAY, BOT_GRAY, BOX_GRAY = 90, 40, 200
 PARK_DISTANCE = 1000.0
+# Spawn-key tags of the random streams drawn beside the episode's main one (``self.rng``).
+GRID_STREAM, NOISE_STREAM = 0, 1
 # Lidar culling circles reach this far beyond an object's footprint: a car tilting in a
 # collision leans a little outside it.
 LIDAR_CULL_MARGIN = 0.03
+
+
+def substream(seq: np.random.SeedSequence, *key: int) -> np.random.SeedSequence:
+    """The seed sequence ``key`` below ``seq``: independent of ``seq``'s own stream."""
+    return np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, *key))
+
+
+def car_noise_rng(seq: np.random.SeedSequence, name: str) -> np.random.Generator:
+    """A car's actuation-noise stream, keyed by its name: the same whatever the other cars."""
+    name_key = int.from_bytes(hashlib.sha256(name.encode()).digest()[:8], "little")
+    return np.random.default_rng(substream(seq, NOISE_STREAM, name_key))
 
 
 @dataclass
@@ -83,13 +103,38 @@ class _Bot:
 
 @dataclass(frozen=True)
 class _Scene:
-    """Objects on track at one instant, with the controlled car each belongs to (if any)."""
+    """Objects on track at one instant: obstacles, bots, then the racing cars front to back
+    on the grid, each with its name (``box<i>``, ``bot<i>`` or the car's), its body and
+    the controlled car it is (if any)."""
 
     objects: ObjectsView
     projection: Projection
     boxes: list[Box3D]
     owners: list[str | None]
+    names: list[str]
+    bodies: list[int]
     targets: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Contact:
+    """One contact of a car in a step: the other party, and whether this car caused it."""
+
+    other: str
+    at_fault: bool
+    obstacle: int | None = None  # the box's body, when the other party is a box
+
+
+@dataclass(frozen=True)
+class _Verdict:
+    """What the judging of one step found for one car (nothing moved yet)."""
+
+    params: dict[str, Any]
+    contacts: list[_Contact]
+    status: EpisodeStatus
+    offset: float
+    penalised: bool
+    released: bool
 
 
 @dataclass
@@ -102,6 +147,7 @@ class _Live:
     hold: Placement | None = None
     last_point: np.ndarray | None = None
     parked: bool = False
+    released_at: float | None = None
 
 
 class RacingEnv(ParallelEnv):
@@ -206,9 +252,13 @@ class RacingEnv(ParallelEnv):
             self._seed_seq = np.random.SeedSequence(seed)
             self._episode = -1
         self._episode += 1
-        self.rng = np.random.default_rng(self._seed_seq.spawn(1)[0])
+        episode_seq = self._seed_seq.spawn(1)[0]
+        self.rng = np.random.default_rng(episode_seq)
+        self._grid_rng = np.random.default_rng(substream(episode_seq, GRID_STREAM))
+        noisy = self.possible_agents if self.config.active_variation.has_actuation_noise else []
+        self._noise = {agent: car_noise_rng(episode_seq, agent) for agent in noisy}
+        self.time = 0.0  # before the world: bots draw their first lane change from it
         self._build_world()
-        self.time = 0.0
         self.agents = list(self.possible_agents)
         observations = self._observe()
         infos = {a: self._info(a, self._initial_params(a)) for a in self.agents}
@@ -232,21 +282,34 @@ class RacingEnv(ParallelEnv):
                 car = Car(client, DEFAULT_CAR, place.x, place.y, place.yaw, color=BOT_COLOR)
                 driver = LaneFollower(self.track, bots.speed, lane=lane)
                 self._bots.append(_Bot(car, driver, self._next_lane_change()))
-        self._cars: dict[str, _Live] = {}
-        for i, (agent, place) in enumerate(
-            zip(self.possible_agents, car_grid(self.config, self.track, arc0), strict=True)
-        ):
-            car = Car(client, DEFAULT_CAR, place.x, place.y, place.yaw, color=CAR_COLORS[i])
+        places = dict(
+            zip(
+                self.possible_agents,
+                car_grid(self.config, self.track, arc0, self._grid_rng),
+                strict=True,
+            )
+        )
+        # Bodies are made front to back: the physics follows the bodies' order, and must
+        # not follow the order the cars are listed in. Scenes and lidar batches use it too.
+        self._order = sorted(
+            self.possible_agents,
+            key=lambda a: (-self.track.arc_delta(arc0, places[a].arc), places[a].offset),
+        )
+        built: dict[str, _Live] = {}
+        for agent in self._order:
+            place = places[agent]
+            color = CAR_COLORS[self.possible_agents.index(agent)]
+            car = Car(client, DEFAULT_CAR, place.x, place.y, place.yaw, color=color)
             point = car.model_point()
             record = self._rules.start(self._arc_of(point), 0.0)
-            self._cars[agent] = _Live(car, record, last_point=point)
+            built[agent] = _Live(car, record, last_point=point)
+        self._cars = {agent: built[agent] for agent in self.possible_agents}
         self._lidar = Lidar(client)
         self._car_episodes = dict.fromkeys(self.possible_agents, 0)
         self._scene_cache: _Scene | None = None
         self._snaps: dict[int, CarSnapshot] = {}
-        self._body_owner = {live.car.body_id: a for a, live in self._cars.items()}
-        self._bot_bodies = {bot.car.body_id for bot in self._bots}
         self._obstacle_bodies = {o.body: o for o in self._obstacles}
+        self._last_offsets: dict[int, float] = {}
 
     def _next_lane_change(self) -> float:
         bots = self.config.bots
@@ -265,7 +328,7 @@ class RacingEnv(ParallelEnv):
             steer, speed = self._car_configs[agent].action_space.to_command(actions[agent])
             live.command = (steer, speed)
             if live.hold is None:
-                live.car.apply_command(steer, speed)
+                live.car.apply_command(*self._actuated(agent, steer, speed))
         self._drive_bots()
         world.step(self._client, self._physics)
         self._forget_poses()
@@ -275,22 +338,36 @@ class RacingEnv(ParallelEnv):
             if hold is not None:
                 self._cars[agent].car.hold(hold.x, hold.y, hold.yaw)
 
-        judged = self._judge()
+        verdicts = self._judge()
         observations = self._observe()
         rewards, terminations, truncations, infos = {}, {}, {}, {}
         for agent in self.agents:
             live = self._cars[agent]
-            params = judged[agent]
+            params = verdicts[agent].params
             fn = self._rewards[agent]
             rewards[agent] = check_reward(fn(params), agent, live.record.steps, params)
             terminations[agent] = live.record.done and not live.record.truncated
             truncations[agent] = live.record.truncated
-            infos[agent] = self._info(agent, params)
+            infos[agent] = self._info(agent, params, verdicts[agent].contacts)
+        self._respawn_and_release(verdicts)
         for agent in list(self.agents):
             if self._cars[agent].record.done:
                 self._park(agent)
         self.agents = [a for a in self.agents if not self._cars[a].record.done]
         return observations, rewards, terminations, truncations, infos
+
+    def _actuated(self, agent: str, steer: float, speed: float) -> tuple[float, float]:
+        """The command the car carries out: the policy's plus the ruleset's actuation noise,
+        drawn from the car's own stream (the car clips it to its limits)."""
+        noise = self._noise.get(agent)
+        if noise is None:
+            return steer, speed
+        variation = self.config.active_variation
+        steer_noise, speed_noise = noise.standard_normal(2)
+        return (
+            steer + variation.steering_noise_deg * float(steer_noise),
+            speed * (1.0 + variation.speed_noise_frac * float(speed_noise)),
+        )
 
     def _drive_bots(self) -> None:
         for bot in self._bots:
@@ -300,8 +377,10 @@ class RacingEnv(ParallelEnv):
             state = self._snap(bot.car).state
             bot.car.apply_command(*bot.driver.command(state.x, state.y, state.yaw))
 
-    def _judge(self) -> dict[str, dict[str, Any]]:
-        """Measure every live car, apply the rules, respawn or hold penalised cars."""
+    def _judge(self) -> dict[str, _Verdict]:
+        """Measure every live car, judge its contacts, apply the rules and build its params,
+        all from the world as physics left it: nothing moves here, so no car's verdict
+        depends on the order the cars are judged in (see :meth:`_respawn_and_release`)."""
         agents = self.agents
         snaps = {a: self._snap(self._cars[a].car) for a in agents}
         states = {a: snap.state for a, snap in snaps.items()}
@@ -309,29 +388,26 @@ class RacingEnv(ParallelEnv):
         wheels = np.vstack([snap.wheel_points for snap in snaps.values()])
         on_road = self.track.contains(wheels).reshape(len(agents), 4)
         projection = self._projection_of(agents, points)
-        crash_with = self._at_fault_crashes(agents, projection.arc_length)
-        params = {}
+        contacts = self._contacts(agents)
+        verdicts = {}
         for i, agent in enumerate(agents):
             live = self._cars[agent]
             rec = live.record
             was_frozen = rec.frozen
             moved = math.dist(points[i], live.last_point)
             live.last_point = points[i]
+            mine = contacts.get(agent, [])
             status = self._rules.update(
                 rec,
                 Measurement(
                     arc=float(projection.arc_length[i]),
                     moved=moved,
                     any_wheel_on_track=bool(on_road[i].any()),
-                    crashed=agent in crash_with,
+                    crashed=any(c.at_fault for c in mine),
                 ),
                 self.time,
             )
-            if was_frozen and not rec.frozen:
-                live.hold = None
-            elif not was_frozen and rec.frozen:
-                self._respawn(live, status, float(projection.offset[i]), crash_with.get(agent))
-            params[agent] = build_params(
+            params = build_params(
                 track=self.track,
                 is_reversed=self.is_reversed,
                 model_point=points[i],
@@ -348,7 +424,17 @@ class RacingEnv(ParallelEnv):
                 objects=self._objects_view(exclude=agent),
                 waypoints=self._waypoints,
             )
-        return params
+            verdicts[agent] = _Verdict(
+                params=params,
+                contacts=mine,
+                status=status,
+                offset=float(projection.offset[i]),
+                penalised=not was_frozen and rec.frozen,
+                released=was_frozen and not rec.frozen,
+            )
+        scene = self._scene()
+        self._last_offsets = dict(zip(scene.bodies, scene.projection.offset.tolist(), strict=True))
+        return verdicts
 
     def _projection_of(self, agents: list[str], points: np.ndarray) -> Projection:
         """The centre-line projection of the cars' model points, from the scene if it has them."""
@@ -357,51 +443,98 @@ class RacingEnv(ParallelEnv):
             return scene.projection.rows([scene.owners.index(agent) for agent in agents])
         return self.track.project(points)
 
-    def _at_fault_crashes(self, agents: list[str], arcs: np.ndarray) -> dict[str, int | None]:
-        """Cars at fault for a contact this step, with the obstacle body they hit (if any).
-
-        A car touching an obstacle is at fault; of two cars (or a car and a bot) touching,
-        the one behind along the track is.
-        """
-        racing = [live.car.body_id for live in self._cars.values() if not live.parked]
-        bodies = racing + [b.car.body_id for b in self._bots] + list(self._obstacle_bodies)
-        arc_of = {self._cars[a].car.body_id: float(arcs[i]) for i, a in enumerate(agents)}
-        if self._bots:
-            bot_arcs = self.track.project(
-                np.array([self._snap(b.car).model_point for b in self._bots])
-            ).arc_length
-            arc_of.update(
-                {b.car.body_id: float(s) for b, s in zip(self._bots, bot_arcs, strict=True)}
-            )
-        at_fault: dict[str, int | None] = {}
-        for a, b in world.contact_pairs(self._client, bodies):
-            for car, other in ((a, b), (b, a)):
-                agent = self._body_owner.get(car)
+    def _contacts(self, agents: list[str]) -> dict[str, list[_Contact]]:
+        """Every contact of the live cars ``agents`` this step, judged by the fault rules."""
+        scene = self._scene()
+        pairs = world.contact_pairs(self._client, scene.bodies)
+        found: dict[str, list[_Contact]] = {}
+        if not pairs:
+            return found
+        index = {body: i for i, body in enumerate(scene.bodies)}
+        for pair in pairs:
+            a, b = (index[body] for body in pair)
+            for me, other in ((a, b), (b, a)):
+                agent = scene.owners[me]
                 if agent is None or agent not in agents:
                     continue
-                if other in self._obstacle_bodies:
-                    at_fault[agent] = other
-                elif other in arc_of and self._is_behind(arc_of[car], arc_of[other]):
-                    at_fault.setdefault(agent, None)
-        return at_fault
+                at_fault = self._rules.at_fault(
+                    self._party(scene, me, other), self._party(scene, other, me)
+                )
+                box = scene.bodies[other] if other < len(self._obstacles) else None
+                found.setdefault(agent, []).append(_Contact(scene.names[other], at_fault, box))
+        for agent_contacts in found.values():
+            agent_contacts.sort(key=lambda c: c.other)
+        return found
 
-    def _is_behind(self, arc: float, other_arc: float) -> bool:
-        return self.track.arc_delta(arc, other_arc) > 0
+    def _party(self, scene: _Scene, me: int, other: int) -> ContactParty:
+        """Scene object ``me`` as a party of its contact with scene object ``other``."""
+        if me < len(self._obstacles):
+            return ContactParty("box", float(scene.projection.arc_length[me]))
+        offsets = scene.projection.offset
+        body = scene.bodies[me]
+        across = float(offsets[me] - self._last_offsets.get(body, offsets[me]))
+        toward = across * float(np.sign(offsets[other] - offsets[me]))
+        arc = float(scene.projection.arc_length[me])
+        agent = scene.owners[me]
+        if agent is None:
+            return ContactParty("bot", arc, toward)
+        live = self._cars[agent]
+        rejoining = (
+            live.released_at is not None and self.time - live.released_at <= REJOIN_S + 1e-9
+        )
+        return ContactParty("car", arc, toward, held=live.hold is not None, rejoining=rejoining)
 
-    def _respawn(
-        self, live: _Live, status: EpisodeStatus, offset: float, obstacle: int | None
-    ) -> None:
-        rec = live.record
-        hit = None
-        if status == "crashed" and obstacle is not None:
-            o = self._obstacle_bodies[obstacle]
-            hit = (o.place.arc, o.lane)
-        place = respawn_place(self.track, rec.last_arc, offset, hit)
-        live.hold = place
-        live.car.teleport(place.x, place.y, place.yaw)
+    def _respawn_and_release(self, verdicts: Mapping[str, _Verdict]) -> None:
+        """Respawn the cars penalised this step and release those whose penalty is served;
+        both take effect from the next step.
+
+        A penalised car is placed at once, and held there, at the first free spot going
+        back from its own (:func:`arena.spawn.respawn_place`); a car whose penalty is
+        served is released where it is held if nothing is within ``RESPAWN_CLEARANCE_M``
+        of it, else from the first free spot behind. Cars further along the race choose
+        first, so the car behind gives way whatever order the cars are listed in.
+        """
+        moving = [a for a, v in verdicts.items() if v.penalised or v.released]
+        if not moving:
+            return
+        scene = self._scene()
+        taken = {
+            name: rectangle((box.x, box.y), box.yaw, box.length, box.width)
+            for name, box in zip(scene.names, scene.boxes, strict=True)
+        }
+        moving.sort(key=lambda a: (-self._cars[a].record.distance, self._order.index(a)))
+        moved = []
+        for agent in moving:
+            live, verdict = self._cars[agent], verdicts[agent]
+            here = taken.pop(agent)
+            others = list(taken.values())
+            if verdict.released:
+                live.hold, live.released_at = None, self.time
+                if room_around(here, others) >= RESPAWN_CLEARANCE_M:
+                    taken[agent] = here
+                    continue
+                spot = respawn_place(self.track, live.record.last_arc, verdict.offset, taken=others)
+            else:
+                spot = self._respawn_place(live, verdict, others)
+                live.hold = spot
+            live.car.teleport(spot.x, spot.y, spot.yaw)
+            self._last_offsets.pop(live.car.body_id, None)
+            taken[agent] = car_footprint(spot)
+            moved.append(live)
         self._forget_poses()
-        live.last_point = live.car.model_point()
-        self._rules.respawned(rec, self._arc_of(live.last_point))
+        for live in moved:
+            live.last_point = live.car.model_point()
+            self._rules.respawned(live.record, self._arc_of(live.last_point))
+
+    def _respawn_place(self, live: _Live, verdict: _Verdict, taken: list[np.ndarray]) -> Placement:
+        """The spot a car penalised this step is held at: behind the box it hit, if any."""
+        hit = None
+        if verdict.status == "crashed":
+            box = next((c.obstacle for c in verdict.contacts if c.obstacle is not None), None)
+            if box is not None:
+                o = self._obstacle_bodies[box]
+                hit = (o.place.arc, o.lane)
+        return respawn_place(self.track, live.record.last_arc, verdict.offset, hit, taken)
 
     def _arc_of(self, point: np.ndarray) -> float:
         return float(self.track.project(point[None, :]).arc_length[0])
@@ -428,11 +561,12 @@ class RacingEnv(ParallelEnv):
             raise RuntimeError(f"car {agent!r} is still racing")
         self._car_episodes[agent] += 1
         arc = start_arc(self.config, self.track, self._episode + self._car_episodes[agent])
-        place = car_grid(self.config, self.track, arc)[0]
+        place = grid_slots(len(self.config.cars), self.track, arc)[0]
         live.car.teleport(place.x, place.y, place.yaw)
         live.last_point = live.car.model_point()
         live.record = self._rules.start(self._arc_of(live.last_point), self.time)
         live.hold, live.parked, live.command = None, False, (0.0, 0.0)
+        live.released_at = None
         self._forget_poses()
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
         observation = self._observe([agent])[agent]
@@ -456,22 +590,25 @@ class RacingEnv(ParallelEnv):
         if self._scene_cache is not None:
             return self._scene_cache
         owners: list[str | None] = []
+        names, bodies = [], []
         locations, headings, speeds, boxes = [], [], [], []
-        for o in self._obstacles:
+        for i, o in enumerate(self._obstacles):
             owners.append(None)
+            names.append(f"box{i}")
+            bodies.append(o.body)
             locations.append((o.place.x, o.place.y))
             headings.append(math.degrees(o.place.yaw))
             speeds.append(0.0)
             boxes.append(Box3D(o.place.x, o.place.y, o.place.yaw, *o.size, gray=BOX_GRAY))
-        movers = [(None, b.car, BOT_GRAY) for b in self._bots] + [
-            (a, self._cars[a].car, CAR_GRAY)
-            for a in self.possible_agents
-            if not self._cars[a].parked
+        movers = [(None, f"bot{i}", b.car, BOT_GRAY) for i, b in enumerate(self._bots)] + [
+            (a, a, self._cars[a].car, CAR_GRAY) for a in self._order if not self._cars[a].parked
         ]
-        for owner, car, gray in movers:
+        for owner, name, car, gray in movers:
             snap = self._snap(car)
             state = snap.state
             owners.append(owner)
+            names.append(name)
+            bodies.append(car.body_id)
             locations.append(tuple(snap.model_point))
             headings.append(math.degrees(state.yaw))
             speeds.append(abs(state.speed))
@@ -485,7 +622,7 @@ class RacingEnv(ParallelEnv):
         targets = np.array(
             [(b.x, b.y, 0.5 * math.hypot(b.length, b.width) + LIDAR_CULL_MARGIN) for b in boxes]
         ).reshape(-1, 3)
-        self._scene_cache = _Scene(view, projection, boxes, owners, targets)
+        self._scene_cache = _Scene(view, projection, boxes, owners, names, bodies, targets)
         return self._scene_cache
 
     def _objects_view(self, exclude: str) -> ObjectsView:
@@ -509,8 +646,13 @@ class RacingEnv(ParallelEnv):
         return {agent: self._observe_one(agent, ranges.get(agent)) for agent in agents}
 
     def _scan_lidars(self, agents: list[str]) -> dict[str, np.ndarray]:
-        """Lidar ranges of ``agents``, casting only beams aimed at objects they could see."""
+        """Lidar ranges of ``agents``, casting only beams aimed at objects they could see.
+
+        The cars scan (and draw their noise) front to back on the grid, whatever order
+        ``agents`` lists them in.
+        """
         scene = self._scene()
+        agents = sorted(agents, key=self._order.index)
         poses, excludes = [], []
         for agent in agents:
             car = self._cars[agent].car
@@ -581,10 +723,17 @@ class RacingEnv(ParallelEnv):
             waypoints=self._waypoints,
         )
 
-    def _info(self, agent: str, params: dict[str, Any]) -> dict[str, Any]:
+    def _info(
+        self, agent: str, params: dict[str, Any], contacts: Sequence[_Contact] = ()
+    ) -> dict[str, Any]:
+        """A car's step info: its params and record, its race ``distance`` (m since its
+        start) and its ``contacts`` this step (``other``: a car's name, ``bot<i>`` or
+        ``box<i>``; ``at_fault``: whether this car caused it)."""
         rec = self._cars[agent].record
         return {
             "params": params,
+            "distance": rec.distance,
+            "contacts": [{"other": c.other, "at_fault": c.at_fault} for c in contacts],
             "episode_status": rec.status,
             "laps": rec.laps,
             "lap_times": list(rec.lap_times),

@@ -4,6 +4,7 @@ Pure bookkeeping (no physics): the env measures each car every control step and 
 :class:`RuleBook` what happened, in the spec's order — lap complete, immobilised, off
 track, crashed, reversed, time up. In ``training`` mode the first incident ends the
 car's episode; in ``race`` mode the car is frozen for the penalty and then respawned.
+:meth:`RuleBook.at_fault` says which party of a contact caused it (the crash rule).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from arena.car_spec import DEFAULT_CAR
 from arena.config import Mode, Penalties
 from tracks.track import Track
 
@@ -29,6 +31,13 @@ EpisodeStatus = Literal[
 INCIDENTS = ("immobilized", "off_track", "crashed", "reversed")
 STUCK_STEPS = 15
 IMMOBILE_METRES = 0.0003
+# Contacts (docs/arena.md, "Contacts and fault"): two parties whose arc lengths differ by
+# less than half a car length are side by side; one of them steered into the other when
+# it moved this much further across the track towards the other in the step (0.15 m/s at
+# 15 Hz); a car released from a penalty is rejoining for this long.
+SIDE_BY_SIDE_M = 0.5 * DEFAULT_CAR.length
+SWERVE_M = 0.01
+REJOIN_S = 1.0
 
 
 @dataclass
@@ -75,6 +84,22 @@ class Measurement:
     moved: float
     any_wheel_on_track: bool
     crashed: bool
+
+
+@dataclass(frozen=True)
+class ContactParty:
+    """One party of a contact, as the fault rules see it.
+
+    ``toward`` is how far it moved across the track towards the other party in the step
+    (metres, negative when away); ``held`` is a car frozen in place serving a penalty;
+    ``rejoining`` a car released from a penalty less than ``REJOIN_S`` ago.
+    """
+
+    kind: Literal["car", "bot", "box"]
+    arc: float
+    toward: float = 0.0
+    held: bool = False
+    rejoining: bool = False
 
 
 class RuleBook:
@@ -183,6 +208,25 @@ class RuleBook:
             return "in_progress"
         rec.status = "pause"
         return "pause"
+
+    def at_fault(self, me: ContactParty, other: ContactParty) -> bool:
+        """Whether ``me`` caused its contact with ``other``; never both parties.
+
+        In order: a held car, a bot or a box never is; a car hitting a box or a held car
+        is; a car rejoining after a penalty is, against one already racing; side by side
+        (arc lengths within ``SIDE_BY_SIDE_M``) the one that steered into the other
+        (moved ``SWERVE_M`` more towards it), else neither; otherwise the one behind.
+        """
+        if me.kind != "car" or me.held:
+            return False
+        if other.kind == "box" or other.held:
+            return True
+        if me.rejoining != other.rejoining:
+            return me.rejoining
+        gap = self.track.arc_delta(me.arc, other.arc)
+        if abs(gap) < SIDE_BY_SIDE_M:
+            return me.toward - other.toward > SWERVE_M
+        return gap > 0
 
     def respawned(self, rec: CarRecord, arc: float) -> None:
         """Account for a car moved to arc length ``arc`` (a respawn, maybe behind)."""

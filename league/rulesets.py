@@ -15,7 +15,7 @@ def event_config(spec: EventCreate) -> RaceConfig:
     fields = spec.model_dump(
         include={
             "track", "direction", "race_type", "laps", "penalties", "max_resets",
-            "time_limit_s", "obstacles", "bots",
+            "time_limit_s", "obstacles", "bots", "variation",
         },
         exclude_none=True,
     )  # fmt: skip

@@ -10,7 +10,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
-from arena.config import BotConfig, ObstacleConfig, Penalties, RaceType
+from arena.config import BotConfig, ObstacleConfig, Penalties, RaceType, SeedVariation
 from submissions import Problem
 
 MAX_ID = 2**31 - 1
@@ -106,6 +106,7 @@ class EventCreate(BaseModel):
     time_limit_s: float = Field(default=180.0, gt=0.0, le=3600.0, allow_inf_nan=False)
     obstacles: ObstacleConfig | None = None
     bots: BotConfig | None = None
+    variation: SeedVariation = SeedVariation()
     seeds: list[Annotated[int, Field(ge=0, le=MAX_ID)]] = Field(
         default_factory=lambda: [0], min_length=1, max_length=20
     )
@@ -169,7 +170,11 @@ class JobOut(_Out):
 
 # ------------------------------------------------------------------ leaderboards
 class LeaderboardRow(BaseModel):
-    """DeepRacer's leaderboard columns; times in ms; ratings for head-to-head events."""
+    """DeepRacer's leaderboard columns; times in ms; ratings for head-to-head events.
+
+    The racing metrics (overtakes, times overtaken, at-fault collisions, laps led, gap to
+    the winner in ms) are the counting race's, like every other figure of the row.
+    """
 
     rank: int
     alias: str
@@ -184,6 +189,11 @@ class LeaderboardRow(BaseModel):
     off_track_count: int
     collision_count: int
     reset_count: int
+    overtakes: int
+    times_overtaken: int
+    at_fault_collisions: int
+    laps_led: int
+    gap_to_winner_ms: int | None
     ranking_score_ms: int | None
     submission_count: int
     mu: float | None = None
@@ -202,7 +212,8 @@ class Leaderboard(BaseModel):
 
 # ------------------------------------------------------------------ races
 class RaceCarOut(_Out):
-    """One car's result with lap splits."""
+    """One car's result with lap splits and racing metrics (``gap_to_winner_ms``: 0 for the
+    winner, null for a car that did not finish)."""
 
     car_name: str
     alias: str | None = None
@@ -220,6 +231,11 @@ class RaceCarOut(_Out):
     reset_count: int
     distance_m: float
     finish_position: int
+    overtakes: int
+    times_overtaken: int
+    at_fault_collisions: int
+    laps_led: int
+    gap_to_winner_ms: int | None
 
 
 class RaceBrief(_Out):

@@ -149,6 +149,7 @@ def test_cli_train_writes_every_output(tmp_path):
     assert len(training.dataframe()) == rows and set(training.dataframe()["iteration"]) == {0, 1}
     assert len(evaluation.dataframe()) > 0
     from arena import make_config
+    from arena.config import NO_VARIATION
     from arena.race import run_race
     from submissions import load_policy, validate
 
@@ -156,7 +157,8 @@ def test_cli_train_writes_every_output(tmp_path):
     assert validate(model_zip).ok
     policy = load_policy(model_zip)  # the round trip: trained, packed, validated, loaded, raced
     race = make_config(sensors=policy.info.sensors, action_space=policy.info.action_space)
-    raced = run_race(race.model_copy(update={"laps": 1, "time_limit_s": 5.0}), {"car0": policy})
+    race = race.model_copy(update={"laps": 1, "time_limit_s": 5.0, "variation": NO_VARIATION})
+    raced = run_race(race, {"car0": policy})  # the round trip, on the fixed start
     assert raced.car("car0").distance > 0.5
 
     resumed = cli.invoke(app, ["train", "--out", str(run), "--resume", "--iterations", "1"])

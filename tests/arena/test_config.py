@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 import arena
-from arena.config import ConfigError, RaceConfig, resolve_track
+from arena.config import NO_VARIATION, ConfigError, RaceConfig, SeedVariation, resolve_track
 from tracks.catalog import get_track
 
 
@@ -26,6 +28,34 @@ def test_ruleset_hash_ignores_cars_and_seed_but_not_rules() -> None:
     assert base.ruleset_hash() != arena.make_config(seed=1, direction="cw").ruleset_hash()
 
 
+def test_ruleset_hash_covers_what_the_seed_varies() -> None:
+    base = arena.make_config(race_type="head_to_model")
+    calmer = arena.make_config(race_type="head_to_model", variation={"steering_noise_deg": 0.5})
+    fixed_grid = arena.make_config(race_type="head_to_model", variation={"shuffle_grid": False})
+    hashes = {base.ruleset_hash(), calmer.ruleset_hash(), fixed_grid.ruleset_hash()}
+    assert len(hashes) == 3
+    assert base.variation.has_actuation_noise and base.variation.start_jitter_m > 0
+
+
+def test_configs_stored_before_seed_variation_load_with_its_defaults() -> None:
+    stored = json.loads(arena.make_config(race_type="head_to_model", seed=3).to_json())
+    del stored["variation"]
+    loaded = RaceConfig.from_json(json.dumps(stored))
+    assert loaded.variation == SeedVariation()
+    ruleset = {k: v for k, v in loaded.ruleset().items() if k != "variation"}
+    rebuilt = RaceConfig.build(**ruleset, cars=stored["cars"], seed=3)  # as the league does
+    assert rebuilt == loaded
+
+
+def test_seed_variation_is_for_races_only() -> None:
+    varied = {"steering_noise_deg": 2.0}
+    race = arena.make_config(variation=varied)
+    training = arena.make_config(variation=varied, mode="training")
+    assert race.active_variation == race.variation
+    assert training.active_variation == NO_VARIATION
+    assert race.ruleset_hash() == training.ruleset_hash()
+
+
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
@@ -44,6 +74,8 @@ def test_ruleset_hash_ignores_cars_and_seed_but_not_rules() -> None:
         ({"race_type": "drag_race"}, "race_type"),
         ({"race_type": "time_trial", "num_cars": 2}, "exactly one"),
         ({"physics": {"control_hz": 15, "physics_hz": 50}}, "whole multiple"),
+        ({"variation": {"start_jitter_m": 0.5}}, "variation.start_jitter_m"),
+        ({"variation": {"speed_noise_frac": -0.1}}, "variation.speed_noise_frac"),
     ],
 )
 def test_bad_configs_raise_one_clear_error(kwargs: dict, message: str) -> None:

@@ -9,7 +9,7 @@ import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import arena
-from arena.config import resolve_track
+from arena.config import NO_VARIATION, resolve_track
 from arena.drivers import LaneFollowerPolicy
 from arena.env import RacingEnv
 from arena.lidar import clip_lidar
@@ -189,11 +189,18 @@ def test_object_avoidance_crash_respawns_behind_the_box_in_the_other_lane() -> N
 
 
 def test_head_to_model_rear_car_is_at_fault() -> None:
-    config = arena.make_config(race_type="head_to_model", num_cars=2, laps=1, time_limit_s=15.0)
+    config = arena.make_config(
+        race_type="head_to_model",
+        num_cars=2,
+        laps=1,
+        time_limit_s=15.0,
+        variation=NO_VARIATION,  # car1 starts right behind car0, commands as given
+    )
     track, _ = resolve_track(config)
     space = config.cars[0].action_space
     slow = LaneFollowerPolicy(track, space, speed=0.4)
     fast = LaneFollowerPolicy(track, space, speed=0.8)
+    slow.follower.lane = fast.follower.lane = "inner"  # one line: car1 runs into car0
     result = run_race(config, {"car0": slow, "car1": fast})  # car1 starts behind
     assert result.car("car1").crash_count >= 1
     assert result.car("car0").crash_count == 0
@@ -260,7 +267,9 @@ def test_training_restart_car_starts_a_new_episode_for_one_car() -> None:
 
 
 def test_sensors_see_the_car_ahead() -> None:
-    env = arena.parallel_env(race_type="head_to_model", num_cars=2, sensors=["camera", "lidar"])
+    env = arena.parallel_env(
+        race_type="head_to_model", num_cars=2, sensors=["camera", "lidar"], variation=NO_VARIATION
+    )
     obs, _ = env.reset(seed=0)
     lidar = obs["car1"]["lidar"]  # car1 starts 0.8 m behind car0, one lane to the right
     angles = env._lidar.beam_angles
@@ -302,7 +311,7 @@ def test_lidar_culling_in_races_changes_no_view(race_type: str, num_cars: int) -
         noise_state = env.rng.bit_generator.state
         seen = env._scan_lidars(env.agents)  # what the cars' observations are made of
         env.rng.bit_generator.state = noise_state
-        for agent in env.agents:
+        for agent in sorted(env.agents, key=env._order.index):  # the batch's (noise) order
             car = env._cars[agent].car
             state = car.state()
             full = env._lidar.scan(state.x, state.y, state.yaw, [car.body_id], rng=env.rng)
