@@ -121,7 +121,9 @@ def race_command(
 
 
 def print_results(result) -> None:
-    """A Rich table of a race result, in finishing order."""
+    """A Rich table of a race result, in finishing order: times, the gap to the winner,
+    incidents and racing metrics (overtakes made and suffered, at-fault collisions, laps
+    led)."""
     from rich.console import Console
     from rich.table import Table
 
@@ -137,10 +139,15 @@ def print_results(result) -> None:
         "best",
         "average",
         "total",
+        "gap",
         "off-track",
         "crashes",
         "resets",
         "penalty s",
+        "overtakes",
+        "overtaken",
+        "at-fault",
+        "laps led",
     ):
         table.add_column(column, justify="right" if column not in ("car", "status") else "left")
     for name in result.finish_order:
@@ -153,9 +160,14 @@ def print_results(result) -> None:
             secs(c.best_lap),
             secs(c.average_lap),
             secs(c.total_time),
+            "-" if c.gap_to_winner is None else f"+{c.gap_to_winner:.3f}",
             str(c.off_track_count),
             str(c.crash_count),
             str(c.reset_count),
             f"{c.penalty_seconds:.0f}",
+            str(c.overtakes),
+            str(c.times_overtaken),
+            str(c.at_fault_collisions),
+            str(c.laps_led),
         )
     Console().print(table)

@@ -17,6 +17,7 @@ from typing import Any
 from arena.config import RaceConfig
 from arena.env import RacingEnv, RewardFunction
 from arena.policy import Policy
+from arena.racing_metrics import CarStep, RacingMetrics
 from arena.simtrace import StepFacts, step_facts
 
 TRACE_COLUMNS = (
@@ -38,7 +39,12 @@ TRACE_COLUMNS = (
 
 @dataclass(frozen=True)
 class CarResult:
-    """One car's race: laps and times (simulated seconds, penalties included) and incidents."""
+    """One car's race: laps and times (simulated seconds, penalties included), incidents and
+    racing metrics (:mod:`arena.racing_metrics`).
+
+    ``gap_to_winner`` is the car's total time minus the winner's, in seconds: 0.0 for the
+    winner, ``None`` for a car that did not finish (and for every car when none finished).
+    """
 
     name: str
     status: str
@@ -53,6 +59,11 @@ class CarResult:
     penalty_seconds: float
     distance: float
     finish_position: int
+    overtakes: int = 0
+    times_overtaken: int = 0
+    at_fault_collisions: int = 0
+    laps_led: int = 0
+    gap_to_winner: float | None = None
 
 
 @dataclass(frozen=True)
@@ -62,9 +73,11 @@ class RaceResult:
     ``trace`` maps car name to columns (:data:`TRACE_COLUMNS`, each a field of
     :class:`arena.simtrace.StepFacts`), one value per control step the car was racing;
     ``bots`` holds the bot cars' ``[x, y, yaw]`` per step and ``obstacles`` the boxes as
-    ``[x, y, yaw, length, width]``. ``facts`` keeps each car's whole
-    :class:`~arena.simtrace.StepFacts` per step for simtrace files; it lives only in the
-    process that ran the race (``to_dict`` leaves it out, ``from_dict`` has none).
+    ``[x, y, yaw, length, width]``. ``events`` lists the race's overtakes and contacts as
+    :meth:`arena.racing_metrics.RaceEvent.to_dict` dicts, in time order. ``facts`` keeps
+    each car's whole :class:`~arena.simtrace.StepFacts` per step for simtrace files; it
+    lives only in the process that ran the race (``to_dict`` leaves it out, ``from_dict``
+    has none).
     """
 
     config: RaceConfig
@@ -75,6 +88,7 @@ class RaceResult:
     trace: dict[str, dict[str, list]] = field(repr=False)
     bots: list[list[list[float]]] = field(default_factory=list, repr=False)
     obstacles: list[list[float]] = field(default_factory=list, repr=False)
+    events: list[dict[str, Any]] = field(default_factory=list, repr=False)
     facts: dict[str, list[StepFacts]] = field(default_factory=dict, repr=False, compare=False)
 
     def car(self, name: str) -> CarResult:
@@ -83,6 +97,15 @@ class RaceResult:
             if result.name == name:
                 return result
         raise KeyError(name)
+
+    def replay_data(self) -> dict[str, Any]:
+        """What a replay draws: ``trace``, ``bots``, ``obstacles`` and ``events``."""
+        return {
+            "trace": self.trace,
+            "bots": self.bots,
+            "obstacles": self.obstacles,
+            "events": self.events,
+        }
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (floats at full precision)."""
@@ -93,9 +116,7 @@ class RaceResult:
             "finish_order": self.finish_order,
             "duration": self.duration,
             "steps": self.steps,
-            "trace": self.trace,
-            "bots": self.bots,
-            "obstacles": self.obstacles,
+            **self.replay_data(),
         }
 
     def to_json(self) -> str:
@@ -104,7 +125,8 @@ class RaceResult:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RaceResult:
-        """Rebuild a result stored with :meth:`to_dict`."""
+        """Rebuild a result stored with :meth:`to_dict` (results stored before racing
+        metrics existed come back with zero counts, no gaps and no events)."""
         return cls(
             config=RaceConfig.model_validate(data["config"]),
             cars=[CarResult(**c) for c in data["cars"]],
@@ -114,6 +136,7 @@ class RaceResult:
             trace=data["trace"],
             bots=data.get("bots", []),
             obstacles=data.get("obstacles", []),
+            events=data.get("events", []),
         )
 
 
@@ -150,21 +173,31 @@ def run_race(
         bots: list[list[list[float]]] = []
         obstacles = [list(o) for o in env.obstacle_poses()]
         last_info = dict(infos)
+        metrics = RacingMetrics(_grid_offsets(env, names))
         steps = 0
         while env.agents:
             actions = {a: _act(policies[a], observations[a], last_info[a]) for a in env.agents}
             observations, rewards, _, _, infos = env.step(actions)
             steps += 1
             last_info.update(infos)
+            metrics.update(env.time, {a: CarStep.from_info(info) for a, info in infos.items()})
             if record_trace:
                 _record(env, trace, facts, actions, rewards, infos)
                 if env.bot_poses():
                     bots.append([list(b) for b in env.bot_poses()])
             if on_step is not None:
                 on_step(env)
-        return _result(config, env, steps, trace, facts, bots, obstacles)
+        return _result(config, env, steps, trace, facts, bots, obstacles, metrics)
     finally:
         env.close()
+
+
+def _grid_offsets(env: RacingEnv, names: list[str]) -> dict[str, float]:
+    """Each car's start, metres along the track from the front of the grid (<= 0)."""
+    first = env.record(names[0]).start_arc
+    ahead = {n: float(env.track.arc_delta(first, env.record(n).start_arc)) for n in names}
+    front = max(ahead.values())
+    return {n: ahead[n] - front for n in names}
 
 
 def _record(
@@ -192,6 +225,7 @@ def _result(
     facts: dict[str, list[StepFacts]],
     bots: list[list[list[float]]],
     obstacles: list[list[float]],
+    metrics: RacingMetrics,
 ) -> RaceResult:
     rows = []
     for car in config.cars:
@@ -213,6 +247,7 @@ def _result(
                 "reset_count": rec.reset_count,
                 "penalty_seconds": rec.penalty_seconds,
                 "distance": rec.distance,
+                **asdict(metrics.cars[car.name]),
             }
         )
     order = sorted(
@@ -226,7 +261,15 @@ def _result(
         ),
     )
     position = {r["name"]: i + 1 for i, r in enumerate(order)}
-    cars = [CarResult(**r, finish_position=position[r["name"]]) for r in rows]
+    winner_time = order[0]["total_time"]
+    cars = [
+        CarResult(
+            **r,
+            finish_position=position[r["name"]],
+            gap_to_winner=None if r["total_time"] is None else r["total_time"] - winner_time,
+        )
+        for r in rows
+    ]
     return RaceResult(
         config=config,
         cars=cars,
@@ -236,5 +279,6 @@ def _result(
         trace=trace,
         bots=bots,
         obstacles=obstacles,
+        events=[e.to_dict() for e in metrics.events],
         facts=facts,
     )

@@ -141,16 +141,14 @@ def record_race(
     job_id: int | None = None,
     commit: bool = True,
 ) -> Race:
-    """Store a finished race: config, per-car results (ms), trace file, the job it ran for.
+    """Store a finished race: config, per-car results (ms) and racing metrics, the replay file
+    (trace, bots, obstacles and the overtake and contact events), the job it ran for.
 
     ``entries`` maps car names to the entries that drove them (bots have none). The job's
     own state is the queue's (:func:`league.queue.claim_done`). With ``commit=False`` the
     rows join the caller's transaction (workers commit once).
     """
-    trace = json.dumps(
-        {"trace": result.trace, "bots": result.bots, "obstacles": result.obstacles},
-        separators=(",", ":"),
-    ).encode()
+    trace = json.dumps(result.replay_data(), separators=(",", ":")).encode()
     trace_sha, _ = storage.put("traces", trace)
     race = Race(
         event_id=event.id,
@@ -184,6 +182,11 @@ def record_race(
                 reset_count=car.reset_count,
                 distance_m=car.distance,
                 finish_position=car.finish_position,
+                overtakes=car.overtakes,
+                times_overtaken=car.times_overtaken,
+                at_fault_collisions=car.at_fault_collisions,
+                laps_led=car.laps_led,
+                gap_to_winner_ms=_ms(car.gap_to_winner),
             )
         )
     session.add(race)

@@ -220,7 +220,9 @@ class Race(Base):
 
 
 class RaceCar(Base):
-    """One participant's result in one race (times in ms, penalties included)."""
+    """One participant's result in one race (times in ms, penalties included) with its racing
+    metrics (:mod:`arena.racing_metrics`); ``gap_to_winner_ms`` is 0 for the winner and
+    null for a car that did not finish."""
 
     __tablename__ = "race_cars"
     __table_args__ = (
@@ -249,6 +251,11 @@ class RaceCar(Base):
     reset_count: Mapped[int] = mapped_column(Integer, default=0)
     distance_m: Mapped[float] = mapped_column(Float, default=0.0)
     finish_position: Mapped[int] = mapped_column(Integer)
+    overtakes: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    times_overtaken: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    at_fault_collisions: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    laps_led: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
+    gap_to_winner_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
 
     race: Mapped[Race] = relationship(back_populates="cars")
 

@@ -4,7 +4,8 @@ Lap times from the arena already hold the penalties (a penalised car is frozen w
 clock runs), so the ranking score is the metric itself: total time of the race's laps,
 best lap or average lap, in ms. Cars that finished rank before those that did not; those
 rank by laps done, then distance. Each racer's best result counts. Head-to-head events rank
-by the conservative openskill rating (``ordinal = mu - 3 sigma``).
+by the conservative openskill rating (``ordinal = mu - 3 sigma``), updated from finish
+positions; a race repeating an earlier one's lineup, ruleset and seed is not rated again.
 
 The pure functions (:func:`standings`, :func:`rate`) know nothing of the database;
 :func:`leaderboard` and :func:`rate_race` read and write an event's stored results with
@@ -13,6 +14,7 @@ them, and :func:`standing_row` is the one JSON form of a leaderboard row.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -20,18 +22,19 @@ from typing import Any
 
 from openskill.models import PlackettLuce
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, selectinload
 
 from league.crud import bump_results_version
 from league.models import Entry, Event, Model, Race, RaceCar, Racer, Rating
 
+log = logging.getLogger("slipstream.ranking")
 METRIC_FIELD = {"total": "total_ms", "best": "best_ms", "average": "average_ms"}
 _MODEL = PlackettLuce()
 
 
 @dataclass(frozen=True)
 class Result:
-    """One car's result in one race, with who drove it."""
+    """One car's result in one race, with who drove it and its racing metrics."""
 
     racer_id: int
     alias: str
@@ -47,6 +50,11 @@ class Result:
     crash_count: int
     reset_count: int
     distance_m: float
+    overtakes: int = 0
+    times_overtaken: int = 0
+    at_fault_collisions: int = 0
+    laps_led: int = 0
+    gap_to_winner_ms: int | None = None
 
 
 def unraced(racer_id: int, alias: str, model_id: int, model_name: str) -> Result:
@@ -156,6 +164,8 @@ def rate(skills: Sequence[Skill], finish_positions: Sequence[int]) -> list[Skill
 def standing_row(standing: Standing) -> dict[str, Any]:
     """A leaderboard row as plain JSON: the API's columns plus ``racer_id``.
 
+    Every figure, the racing metrics included, is the counting race's.
+
     The API's ``LeaderboardRow`` reads it (dropping ``racer_id``); the scheduler stores it
     as an event's final standings.
     """
@@ -175,6 +185,11 @@ def standing_row(standing: Standing) -> dict[str, Any]:
         "off_track_count": r.off_track_count,
         "collision_count": r.crash_count,
         "reset_count": r.reset_count,
+        "overtakes": r.overtakes,
+        "times_overtaken": r.times_overtaken,
+        "at_fault_collisions": r.at_fault_collisions,
+        "laps_led": r.laps_led,
+        "gap_to_winner_ms": r.gap_to_winner_ms,
         "ranking_score_ms": standing.score_ms,
         "submission_count": standing.submissions,
         "mu": skill.mu if skill else None,
@@ -209,6 +224,11 @@ def leaderboard(session: Session, event: Event) -> list[Standing]:
             crash_count=car.crash_count,
             reset_count=car.reset_count,
             distance_m=car.distance_m,
+            overtakes=car.overtakes,
+            times_overtaken=car.times_overtaken,
+            at_fault_collisions=car.at_fault_collisions,
+            laps_led=car.laps_led,
+            gap_to_winner_ms=car.gap_to_winner_ms,
         )
         for car, race_id, racer_id, alias, model_name in rows
     ]
@@ -244,13 +264,51 @@ def _unraced_entries(session: Session, event: Event, raced: set[int]) -> list[Re
     ]
 
 
+def lineup_key(cars: Iterable[RaceCar]) -> tuple[int, ...]:
+    """Who raced, whatever the grid order: sorted model ids, 0 for each bot."""
+    return tuple(sorted(c.model_id or 0 for c in cars))
+
+
+def rated_twin(session: Session, race: Race) -> Race | None:
+    """An earlier race of the event with ``race``'s lineup, ruleset and seed, if any.
+
+    Such a race was rated already: racing it again repeats one observation.
+    """
+    session.flush()  # ``race`` needs its id
+    earlier = session.scalars(
+        select(Race)
+        .options(selectinload(Race.cars))
+        .where(
+            Race.event_id == race.event_id,
+            Race.ruleset_hash == race.ruleset_hash,
+            Race.seed == race.seed,
+            Race.id < race.id,
+        )
+        .order_by(Race.id)
+    )
+    key = lineup_key(race.cars)
+    return next((r for r in earlier if lineup_key(r.cars) == key), None)
+
+
 def rate_race(session: Session, race: Race) -> None:
     """Update the head-to-head ratings of the models in ``race`` (Plackett-Luce).
 
+    A race that adds no information is not rated (and is logged): one with fewer than two
+    models, or one whose (lineup, ruleset, seed) an earlier race of the event already had.
     Joins the caller's transaction (the worker's result transaction); does not commit.
     """
     cars = [c for c in race.cars if c.model_id is not None]
     if len(cars) < 2:
+        return
+    twin = rated_twin(session, race)
+    if twin is not None:
+        log.info(
+            "race %d not rated: race %d had the same lineup %s, ruleset and seed %d",
+            race.id,
+            twin.id,
+            list(lineup_key(race.cars)),
+            race.seed,
+        )
         return
     held = {
         r.model_id: r

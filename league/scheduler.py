@@ -1,11 +1,12 @@
 """The scheduler daemon: turns entries into jobs, runs head-to-model rounds, closes events.
 
 Each tick it (1) queues the missing evaluation jobs of time-trial, object-avoidance and
-head-to-bot entries (one per event seed), (2) starts due head-to-model rounds, (3) returns
-jobs with expired leases to the queue (or fails them), (4) writes the final standings of
-closed events. Every write is safe with several schedulers running: job inserts rely on the
-unique constraints (``ON CONFLICT DO NOTHING``), a round is claimed by advancing the event's
-``next_round_at`` with a conditional update, and a snapshot is written only where none is.
+head-to-bot entries (one per event seed), (2) starts due head-to-model rounds (each race
+on a fresh seed), (3) returns jobs with expired leases to the queue (or fails them), (4)
+writes the final standings of closed events. Every write is safe with several schedulers
+running: job inserts rely on the unique constraints (``ON CONFLICT DO NOTHING``), a round is
+claimed by advancing the event's ``next_round_at`` with a conditional update, and a
+snapshot is written only where none is.
 """
 
 from __future__ import annotations
@@ -14,20 +15,21 @@ import logging
 import random
 import signal
 import time
+from collections.abc import Collection
 from datetime import datetime, timedelta
 
 from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from league.db import make_engine, make_session_factory
-from league.matchmaking import Candidate, plan_round
+from league.matchmaking import Candidate, pairings, plan_round
 from league.models import Entry, Event, Job, Rating, utcnow
 from league.queue import DB_ERRORS, Backoff, evaluation_jobs, expire_leases, insert_jobs
 from league.ranking import initial_skill, leaderboard, standing_row
 from league.settings import Settings
 
 log = logging.getLogger("slipstream.scheduler")
-ROUND_SEED_STRIDE = 1000
+ROUND_SEED_LIMIT = 2**31
 
 
 def queue_evaluations(session: Session) -> int:
@@ -62,6 +64,33 @@ def _candidates(session: Session, event: Event) -> list[Candidate]:
     ]
 
 
+def round_seeds(event_id: int, number: int, count: int, used: Collection[int]) -> list[int]:
+    """``count`` race seeds for round ``number`` of an event, none of them in ``used``.
+
+    Drawn from a stream keyed by event and round, so a round's seeds are reproducible, and
+    differ from round to round: the same lineup races a fresh seed every round.
+    """
+    stream = random.Random(f"seeds:{event_id}:{number}")
+    taken, seeds = set(used), []
+    while len(seeds) < count:
+        seed = stream.randrange(ROUND_SEED_LIMIT)
+        if seed not in taken:
+            taken.add(seed)
+            seeds.append(seed)
+    return seeds
+
+
+def _round_seeds_used(session: Session, event_id: int) -> list[int]:
+    query = select(Job.seed).where(Job.event_id == event_id, Job.kind == "round")
+    return list(session.scalars(query))
+
+
+def _lineups(session: Session, event_id: int, number: int) -> list[list[dict]]:
+    """The grids of round ``number`` of an event (none for round 0)."""
+    query = select(Job.lineup).where(Job.event_id == event_id, Job.round == number)
+    return [lineup or [] for lineup in session.scalars(query)]
+
+
 def _round_busy(session: Session, event_id: int) -> bool:
     return (
         session.scalar(
@@ -75,7 +104,11 @@ def _round_busy(session: Session, event_id: int) -> bool:
 
 
 def start_round(session: Session, event: Event, now: datetime, settings: Settings) -> int:
-    """Claim the event's due round and queue its races; the number of jobs queued."""
+    """Claim the event's due round and queue its races; the number of jobs queued.
+
+    Grids come from :func:`league.matchmaking.plan_round` (pairings of the previous round
+    damped), seeds from :func:`round_seeds`.
+    """
     due = event.next_round_at
     assert due is not None and event.round_interval_s
     following = due
@@ -96,17 +129,16 @@ def start_round(session: Session, event: Event, now: datetime, settings: Setting
     number = (session.scalar(select(func.max(Job.round)).where(Job.event_id == event.id)) or 0) + 1
     rng = random.Random(f"{event.id}:{number}")
     grids = plan_round(
-        _candidates(session, event), settings.round_races_per_model, settings.round_max_cars, rng
+        _candidates(session, event),
+        settings.round_races_per_model,
+        settings.round_max_cars,
+        rng,
+        recent=pairings(_lineups(session, event.id, number - 1)),
     )
+    seeds = round_seeds(event.id, number, len(grids), _round_seeds_used(session, event.id))
     rows = [
-        {
-            "kind": "round",
-            "event_id": event.id,
-            "round": number,
-            "seed": number * ROUND_SEED_STRIDE + i,
-            "lineup": grid,
-        }
-        for i, grid in enumerate(grids)
+        {"kind": "round", "event_id": event.id, "round": number, "seed": seed, "lineup": grid}
+        for seed, grid in zip(seeds, grids, strict=True)
     ]
     added = insert_jobs(session, rows)
     session.commit()

@@ -12,6 +12,7 @@ from sqlalchemy import select
 from league import crud
 from league.api.deps import SessionDep
 from league.auth import AdminRacer, CurrentRacer
+from league.head_to_head import HeadToHead, head_to_head
 from league.models import Event, Model, utcnow
 from league.ranking import leaderboard, standing_row
 from league.schemas import (
@@ -93,6 +94,12 @@ def enter_event(
     )
 
 
+@router.get("/{event_id}/head-to-head", response_model=list[HeadToHead], responses=NOT_FOUND)
+def read_head_to_head(event_id: EventId, session: SessionDep) -> list[HeadToHead]:
+    """Per pairing of models, the races they drove together and who finished ahead."""
+    return head_to_head(session, get_event(session, event_id).id)
+
+
 class LeaderboardCache:
     """Serialised leaderboards per event, valid while the event's results_version holds."""
 
@@ -132,8 +139,9 @@ def _build_leaderboard(request: Request, event_id: int) -> tuple[int, bytes]:
 
 @router.get("/{event_id}/leaderboard", response_model=Leaderboard, responses=NOT_FOUND)
 async def read_leaderboard(event_id: EventId, request: Request) -> Response:
-    """Standings: rank, alias, laps, best / average / total lap time, incidents, score,
-    submissions; head-to-head events add mu, sigma and the conservative ordinal.
+    """Standings: rank, alias, laps, best / average / total lap time, incidents, racing
+    metrics (overtakes, times overtaken, at-fault collisions, laps led, gap to the winner),
+    score, submissions; head-to-head events add mu, sigma and the conservative ordinal.
 
     Served from a per-process cache while the event's results_version is unchanged (one
     primary-key read, on the event loop); a miss rebuilds it in the thread pool.

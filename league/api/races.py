@@ -1,4 +1,4 @@
-"""``/api/races``: race results with lap splits, and their replay traces."""
+"""``/api/races``: race results with lap splits and racing metrics, and their replay traces."""
 
 from __future__ import annotations
 
@@ -81,13 +81,17 @@ def read_race(race_id: RaceId, session: SessionDep) -> RaceOut:
     responses={
         **NOT_FOUND,
         200: {
-            "description": "Replay data: per-car columns per step, bots and obstacles",
+            "description": (
+                "Replay data: per-car columns per step, bots, obstacles, and the overtake"
+                " and contact events"
+            ),
             "content": {"application/json": {"schema": {"type": "object"}}},
         },
     },
 )
 def read_trace(race_id: RaceId, session: SessionDep, storage: StorageDep) -> Response:
-    """The race's replay trace (JSON: ``trace``, ``bots``, ``obstacles``)."""
+    """The race's replay trace (JSON: ``trace``, ``bots``, ``obstacles``, ``events``; races
+    stored before racing metrics have no ``events``)."""
     race = _race(session, race_id)
     if race.trace_sha256 is None:
         raise HTTPException(404, f"Race {race_id} has no trace.")

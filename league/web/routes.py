@@ -16,6 +16,7 @@ from markupsafe import Markup
 from sqlalchemy.orm import selectinload
 
 from league.api.deps import SessionDep
+from league.head_to_head import head_to_head
 from league.models import Event, Race, utcnow
 from league.schemas import MAX_ID
 from league.web import TEMPLATES_DIR
@@ -39,7 +40,7 @@ def home(request: Request, session: SessionDep) -> HTMLResponse:
 
 @router.get("/events/{event_id}", response_class=HTMLResponse)
 def event_page(request: Request, event_id: Id, session: SessionDep) -> HTMLResponse:
-    """An event's live leaderboard and its latest races."""
+    """An event's live leaderboard, its head-to-head records and its latest races."""
     event = session.get(Event, event_id)
     if event is None:
         raise HTTPException(404, f"Event {event_id} not found.")
@@ -49,6 +50,7 @@ def event_page(request: Request, event_id: Id, session: SessionDep) -> HTMLRespo
         event=event,
         thumbnail_svg=thumbnail(event.track, event.direction),
         seconds_left=seconds_left(event, utcnow()),
+        head_to_head=head_to_head(session, event.id),
     )
 
 

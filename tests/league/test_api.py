@@ -4,12 +4,22 @@ jobs, leaderboards and races."""
 from __future__ import annotations
 
 import zipfile
+from dataclasses import replace
 
 from sqlalchemy import select
 
-from league.models import Job
+from league.models import Event, Job
 from tests.league.conftest import UPLOAD_LIMIT, League
-from tests.league.helpers import car, create_event, enter, model_rows, record, upload
+from tests.league.helpers import (
+    car,
+    create_event,
+    enter,
+    model_rows,
+    race_result,
+    record,
+    record_as_worker,
+    upload,
+)
 
 
 def test_health_and_readiness(league: League) -> None:
@@ -176,3 +186,42 @@ def test_closed_event_refuses_entries(league: League) -> None:
     assert answer.status_code == 409 and "not open" in answer.json()["detail"]
     with league.sessions() as session:
         assert session.scalars(select(Job).where(Job.event_id == event["id"])).all() == []
+
+
+def test_racing_metrics_reach_the_race_the_leaderboard_and_the_replay(league: League) -> None:
+    event = create_event(league, name="Pass Masters", race_type="head_to_model", seeds=[0])
+    a = upload(league, "alice", seed=41)
+    b = upload(league, "bob", seed=42)
+    ea = enter(league, "alice", event["id"], a["id"])["entry_id"]
+    eb = enter(league, "bob", event["id"], b["id"])["entry_id"]
+    winner = car("a", finish_position=1, overtakes=2, laps_led=3, gap_to_winner=0.0)
+    loser = car(
+        "b",
+        laps=[12, 12, 12],
+        finish_position=2,
+        times_overtaken=2,
+        at_fault_collisions=1,
+        gap_to_winner=7.2,
+    )
+    events = [
+        {"t": 4.0, "kind": "contact", "car": "b", "other": "a", "at_fault": True},
+        {"t": 9.5, "kind": "overtake", "car": "a", "other": "b", "at_fault": False},
+    ]
+    with league.sessions() as session:
+        result = race_result(session.get_one(Event, event["id"]), [winner, loser])
+    race_id = record_as_worker(
+        league, event["id"], replace(result, events=events), {"a": ea, "b": eb}
+    )
+    with league.client() as anon:
+        cars = {c["car_name"]: c for c in anon.get(f"/api/races/{race_id}").json()["cars"]}
+        rows = anon.get(f"/api/events/{event['id']}/leaderboard").json()["rows"]
+        trace = anon.get(f"/api/races/{race_id}/trace").json()
+    alice = cars["a"]
+    assert (alice["overtakes"], alice["laps_led"], alice["gap_to_winner_ms"]) == (2, 3, 0)
+    assert (cars["b"]["times_overtaken"], cars["b"]["at_fault_collisions"]) == (2, 1)
+    assert cars["b"]["gap_to_winner_ms"] == 7200
+    by_alias = {r["alias"]: r for r in rows}
+    assert by_alias["alice"]["overtakes"] == 2 and by_alias["alice"]["laps_led"] == 3
+    assert by_alias["bob"]["at_fault_collisions"] == 1
+    assert by_alias["bob"]["gap_to_winner_ms"] == 7200
+    assert trace["events"] == events

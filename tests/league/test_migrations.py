@@ -66,6 +66,57 @@ def test_models_match_migrations_and_downgrade_upgrade_again(database: Database)
     engine.dispose()
 
 
+def test_race_results_stored_before_racing_metrics_upgrade_with_zero_counts(
+    database: Database,
+) -> None:
+    engine = make_engine(database.url)
+    with engine.begin() as conn:
+        command.downgrade(alembic_config(conn), "base")
+    upgrade(engine, "0003")
+    with engine.begin() as conn:
+        conn.execute(
+            text(
+                "INSERT INTO events (id, name, race_type, track, direction, ranking_metric,"
+                " ruleset, ruleset_hash, seeds, opens_at, results_version, created_at)"
+                " VALUES (1, 'old cup', 'head_to_model', 'beginner_loop', 'ccw', 'total',"
+                " '{}', :h, '[0]', CURRENT_TIMESTAMP, 0, CURRENT_TIMESTAMP)"
+            ),
+            {"h": "0" * 64},
+        )
+        conn.execute(
+            text(
+                "INSERT INTO races (id, event_id, ruleset_hash, seed, config, summary, created_at)"
+                " VALUES (1, 1, :h, 0, '{}', '{}', CURRENT_TIMESTAMP)"
+            ),
+            {"h": "0" * 64},
+        )
+        conn.execute(
+            text(
+                "INSERT INTO race_cars (id, race_id, car_name, status, laps, lap_times_ms,"
+                " penalty_ms, off_track_count, crash_count, reset_count, distance_m,"
+                " finish_position) VALUES (1, 1, 'car0', 'finished', 1, '[9000]', 0, 0, 2, 2,"
+                " 17.5, 1)"
+            )
+        )
+    upgrade(engine)
+    with engine.connect() as conn:
+        row = conn.execute(
+            text(
+                "SELECT crash_count, overtakes, times_overtaken, at_fault_collisions, laps_led,"
+                " gap_to_winner_ms FROM race_cars"
+            )
+        ).one()
+    assert tuple(row) == (2, 0, 0, 0, 0, None)
+    with engine.begin() as conn:
+        command.downgrade(alembic_config(conn), "0003")
+    assert "overtakes" not in {c["name"] for c in inspect(engine).get_columns("race_cars")}
+    with engine.begin() as conn:
+        for table in ("race_cars", "races", "events"):
+            conn.execute(text(f"DELETE FROM {table}"))
+    upgrade(engine)
+    engine.dispose()
+
+
 def test_readyz_refuses_an_unmigrated_database(tmp_path) -> None:
     app = create_app(Settings(data_dir=tmp_path, rate_limit_per_second=0))
     with ServerThread(app, free_port()) as server:

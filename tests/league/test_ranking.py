@@ -67,6 +67,14 @@ def test_rate_rewards_the_winner() -> None:
         rate([start], [1])
 
 
+@pytest.mark.parametrize("positions", [[3, 2, 1], [2, 1, 3], [3, 1, 2]])
+def test_rate_follows_finish_positions_not_listing_order(positions: list[int]) -> None:
+    start = initial_skill()
+    updated = rate([start, start, start], positions)
+    winner, second, third = (updated[positions.index(p)] for p in (1, 2, 3))
+    assert winner.mu > second.mu > third.mu
+
+
 def test_one_row_shape_for_the_api_and_the_final_snapshot() -> None:
     (rated,) = standings([result(1, 7, total_ms=30000)], "total", {1: 2}, {7: Skill(30.0, 2.0)})
     row = standing_row(rated)

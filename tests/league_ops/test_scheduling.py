@@ -14,7 +14,7 @@ from sqlalchemy import select, update
 from league.matchmaking import Candidate, plan_round
 from league.models import Entry, Event, Job, utcnow
 from league.ranking import initial_skill
-from league.scheduler import Scheduler
+from league.scheduler import Scheduler, round_seeds
 from league.worker import Worker
 from tests.league_ops.conftest import Ops
 from tests.league_ops.helpers import enter, event, model, racer, statuses, wait_until
@@ -40,6 +40,38 @@ def test_close_ratings_meet_more_often() -> None:
 def test_a_lone_model_races_a_bot() -> None:
     (grid,) = plan_round([Candidate(7, 25, 8)], k=1, max_cars=4, rng=random.Random(0))
     assert grid == [{"entry_id": 7}, {"bot": "pursuit"}]
+
+
+def test_round_seeds_are_reproducible_fresh_and_unused() -> None:
+    first = round_seeds(5, 1, 4, used=[])
+    assert first == round_seeds(5, 1, 4, used=[]) and len(set(first)) == 4
+    second = round_seeds(5, 2, 4, used=first)
+    assert not set(second) & set(first)
+    assert round_seeds(6, 1, 4, used=[]) != first  # keyed by event too
+    assert not set(round_seeds(5, 1, 4, used=first[:2])) & set(first[:2])
+
+
+def test_each_round_races_the_same_lineup_on_fresh_seeds(ops: Ops) -> None:
+    ev = event(ops, race_type="head_to_model", round_interval_s=60, seeds=[0])
+    for alias in ("ada", "bob"):
+        enter(ops, ev, model(ops, racer(ops, alias), seed=len(alias) + ord(alias[0])))
+    scheduler = Scheduler(ops.settings)
+    now = utcnow()
+    for number in (1, 2, 3):
+        assert scheduler.tick(now + timedelta(seconds=61 * (number - 1)))["round_jobs"] == 2
+        with ops.sessions() as session:
+            session.execute(update(Job).values(status="done"))  # as if raced
+            session.commit()
+    with ops.sessions() as session:
+        jobs = session.scalars(select(Job).order_by(Job.id)).all()
+    used: list[int] = []
+    for number in (1, 2, 3):
+        rows = [j for j in jobs if j.round == number]
+        assert [sorted(s["entry_id"] for s in j.lineup) for j in rows] == [[1, 2], [1, 2]]
+        seeds = [j.seed for j in rows]
+        assert seeds == round_seeds(ev.id, number, 2, used)  # reproducible, and recorded
+        assert not set(seeds) & set(used)  # the lineup never races a seed twice
+        used += seeds
 
 
 def test_rounds_rate_models_and_closing_writes_standings(ops: Ops) -> None:
@@ -122,5 +154,7 @@ def test_two_scheduler_daemons_make_no_duplicate_jobs(ops: Ops) -> None:
     assert len(evaluations) == 3 * (6 + late) and set(evaluations.values()) == {1}
     rounds = [j for j in jobs if j.kind == "round"]
     assert {j.round for j in rounds} == {1}  # one round, planned once
-    assert [j.lineup for j in sorted(rounds, key=lambda j: j.seed)] == expected
+    rounds.sort(key=lambda j: j.id)
+    assert [j.lineup for j in rounds] == expected
+    assert [j.seed for j in rounds] == round_seeds(h2h.id, 1, len(expected), used=[])
     assert "scheduler stopped" in ops.log("scheduler0") + ops.log("scheduler1")

@@ -47,8 +47,7 @@ def test_time_trial_jobs_race_and_rerun_identically(ops: Ops) -> None:
                 fresh.distance,
                 fresh.off_track_count,
             )
-            trace = {"trace": again.trace, "bots": again.bots, "obstacles": again.obstacles}
-            text = json.dumps(trace, separators=(",", ":")).encode()
+            text = json.dumps(again.replay_data(), separators=(",", ":")).encode()
             assert hashlib.sha256(text).hexdigest() == race.trace_sha256
 
 

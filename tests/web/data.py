@@ -6,8 +6,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from agents.action_spaces import continuous_action_space
+from agents.pursuit import PurePursuitPolicy
 from arena.actions import default_discrete_space
-from arena.config import RaceConfig, resolve_track
+from arena.config import NO_VARIATION, RaceConfig, resolve_track
 from arena.drivers import LaneFollowerPolicy, nearest_action
 from arena.race import RaceResult, run_race
 from league import crud
@@ -53,14 +55,40 @@ class Site:
 
 
 def race(event: Event, drivers: dict[str, tuple[float, int | None]], seed: int) -> RaceResult:
-    """Run one real race of ``event``: car name -> (speed, swerve step or None)."""
-    config = RaceConfig.build(**event.ruleset, cars=[{"name": n} for n in drivers], seed=seed)
+    """Run one real race of ``event``: car name -> (speed, swerve step or None).
+
+    The start is the fixed grid in the listed order and commands are applied as given
+    (``NO_VARIATION``), so that the scripted swerve and finishing order happen as written.
+    """
+    ruleset = {**event.ruleset, "variation": NO_VARIATION}
+    config = RaceConfig.build(**ruleset, cars=[{"name": n} for n in drivers], seed=seed)
     track, _ = resolve_track(config)
     policies: dict[str, Any] = {}
     for car in config.cars:
         speed, swerve_at = drivers[car.name]
         follower = LaneFollowerPolicy(track, car.action_space, speed=speed)
         policies[car.name] = follower if swerve_at is None else Swerve(follower, swerve_at, 8)
+    return run_race(config, policies)
+
+
+def duel(event: Event, fast: str, slow: str, seed: int = 0) -> RaceResult:
+    """A real race of ``event`` in which ``fast`` (pure pursuit capped at 3 m/s) starts behind
+    ``slow`` (capped at 0.7 m/s), gets by on the outside and, in a race of two laps or more,
+    runs into it when lapping it.
+
+    The grid keeps the listed order (``slow`` in front) instead of the one the seed draws.
+    """
+    caps = {slow: 0.7, fast: 3.0}
+    spaces = {name: continuous_action_space(speed_high=cap) for name, cap in caps.items()}
+    ruleset = dict(event.ruleset)
+    ruleset["variation"] = {**ruleset.get("variation", {}), "shuffle_grid": False}
+    config = RaceConfig.build(
+        **ruleset,
+        cars=[{"name": name, "action_space": space} for name, space in spaces.items()],
+        seed=seed,
+    )
+    track, _ = resolve_track(config)
+    policies = {name: PurePursuitPolicy(track, space) for name, space in spaces.items()}
     return run_race(config, policies)
 
 

@@ -5,8 +5,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from league.models import Event
 from tests.league.conftest import League
-from tests.web.data import Site, race, record
+from tests.league.helpers import create_event, enter, upload
+from tests.web.data import Site, duel, race, record
 
 TOKEN_KEY = "slipstream.token"
 
@@ -111,6 +113,84 @@ def test_replay_loads_the_trace_and_the_cars_move_when_played(
     assert abs(state["time"] - state["duration"] / 2) < 0.1
     if screenshot_dir is not None:
         save_screenshot(page, screenshot_dir / "replay.png")
+
+
+def test_replay_marks_each_overtake_and_contact_with_the_car_at_fault(
+    page, league: League, screenshot_dir: Path | None
+) -> None:
+    event_id = create_event(
+        league,
+        name="Overtaking Cup",
+        race_type="head_to_model",
+        track="slipstream_speedway",
+        laps=2,
+        seeds=[0],
+        time_limit_s=90.0,
+    )["id"]
+    # fresh models, so that the other tests' models keep their race histories
+    models = {
+        who: upload(league, who, seed, name=f"{who}-racer")["id"]
+        for who, seed in (("alice", 51), ("bob", 52))
+    }
+    entries = {who: enter(league, who, event_id, models[who])["entry_id"] for who in models}
+    with league.sessions() as session:
+        event = session.get_one(Event, event_id)
+        session.expunge(event)
+    result = duel(event, fast="alice", slow="bob")
+    kinds = [e["kind"] for e in result.events]
+    assert "overtake" in kinds and "contact" in kinds  # the race has both to show
+    race_id = record(league, event_id, result, entries)
+
+    page.goto(f"/races/{race_id}")
+    page.wait_for_selector("#replay[data-ready=true]")
+    listed = page.eval_on_selector_all(
+        "#race-events li.race-event",
+        "items => items.map(li => [li.dataset.kind, li.dataset.car, li.dataset.atFault,"
+        " li.textContent])",
+    )
+    expected = [(e["kind"], e["car"], str(e["at_fault"]).lower()) for e in result.events]
+    assert [tuple(item[:3]) for item in listed] == expected
+    for (kind, car, at_fault, text), event in zip(listed, result.events, strict=True):
+        if kind == "overtake":
+            assert f"{car} passed {event['other']}" in text
+        elif at_fault == "true":
+            assert text.endswith(f"{car} at fault")
+    passes = result.car("alice").overtakes
+    assert passes >= 1
+    assert f"overtakes {passes} " in page.inner_text(".car-card[data-car=alice] .racing")
+
+    first = min(e["t"] for e in result.events)
+    page.eval_on_selector(
+        "#scrub",
+        f"s => {{ s.value = '{int(1000 * first / result.duration) - 1}';"
+        " s.dispatchEvent(new Event('input')); }",
+    )
+    assert page.evaluate("window.slipReplay.marks()") == []
+    page.eval_on_selector(
+        "#scrub", "s => { s.value = '1000'; s.dispatchEvent(new Event('input')); }"
+    )
+    marks = page.evaluate("window.slipReplay.marks()")
+    assert [(m["kind"], m["car"], m["at_fault"]) for m in marks] == [
+        (e["kind"], e["car"], e["at_fault"]) for e in result.events
+    ]
+    for mark in marks:
+        blamed = mark["kind"] == "contact" and mark["at_fault"]
+        assert mark["label"] == (f"{mark['car']} at fault" if blamed else None)
+    if screenshot_dir is not None:
+        save_screenshot(page, screenshot_dir / "replay-racing.png")
+
+    page.goto(f"/events/{event_id}")
+    page.wait_for_selector("#leaderboard[data-loaded=true] tbody tr[data-model-id]")
+    headers = page.eval_on_selector_all("#leaderboard th", "cells => cells.map(c => c.textContent)")
+    with league.client() as client:
+        api_rows = client.get(f"/api/events/{event_id}/leaderboard").json()["rows"]
+    shown = {row[1]: row for row in board_rows(page)}
+    for row in api_rows:
+        cells = shown[row["alias"]]
+        assert cells[headers.index("Overtakes")] == str(row["overtakes"])
+        assert cells[headers.index("At fault")] == str(row["at_fault_collisions"])
+    alice = next(r for r in api_rows if r["alias"] == "alice")
+    assert alice["overtakes"] == passes and alice["at_fault_collisions"] >= 1
 
 
 def test_ghost_compares_a_best_lap_with_the_leader(page, site: Site) -> None:

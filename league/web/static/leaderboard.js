@@ -19,6 +19,7 @@ const TIME_COLUMNS = [
   ["Laps", (r) => r.lap_count],
   ["Off-track", (r) => r.off_track_count],
   ["Collisions", (r) => r.collision_count],
+  ["At fault", (r) => r.at_fault_collisions],
   ["Resets", (r) => r.reset_count],
   ["Submissions", (r) => r.submission_count],
 ];
@@ -35,6 +36,9 @@ const RATING_COLUMNS = [
   ["Best lap", (r) => Slip.ms(r.best_lap_ms)],
   ["Off-track", (r) => r.off_track_count],
   ["Collisions", (r) => r.collision_count],
+  ["Overtakes", (r) => r.overtakes],
+  ["At fault", (r) => r.at_fault_collisions],
+  ["Laps led", (r) => r.laps_led],
   ["Submissions", (r) => r.submission_count],
 ];
 

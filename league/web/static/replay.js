@@ -1,6 +1,7 @@
 // Race page: load the race, its trace and the track geometry, then animate the cars
-// (play / pause, 1x-2x-4x, scrub), list lap and sector splits, mark incidents, and
-// optionally compare a car's best lap with the event leader's as a ghost.
+// (play / pause, 1x-2x-4x, scrub), list lap and sector splits, mark incidents, overtakes and
+// contacts (with the car at fault), and optionally compare a car's best lap with the event
+// leader's as a ghost.
 "use strict";
 
 const COLORS = ["#e6194b", "#2f9bff", "#ffd21f", "#2ecc71", "#ff8a1f", "#b05cff", "#2ee6e6", "#ff5ccd"];
@@ -12,6 +13,7 @@ const player = {
   bots: [],
   botDt: 1 / 15,
   obstacles: [],
+  marks: [],
   time: 0,
   duration: 0,
   speed: 1,
@@ -38,6 +40,7 @@ function drawRace() {
   for (const car of player.cars) {
     for (const incident of car.incidents) if (incident.t <= player.time) view.drawMarker(incident);
   }
+  for (const mark of shownMarks()) view.drawRaceMark(mark, mark.color, mark.label);
   const step = Math.min(Math.floor(player.time / player.botDt), player.bots.length - 1);
   if (step >= 0) {
     for (const bot of player.bots[step]) view.drawCar({ x: bot[0], y: bot[1], yaw: bot[2] }, "#9aa0a6", { label: "bot" });
@@ -49,6 +52,54 @@ function drawRace() {
     car.pose = Laps.poseAt(car.trace, player.time);
     view.drawCar(car.pose, car.color, { label: carLabel(car) });
   }
+}
+
+// ---------------------------------------------------------------- overtakes and contacts
+// The race's events placed where the car they are about was: overtakes in the passing car's
+// colour, contacts in the colour of the car at fault (grey when nobody was), labelled.
+function raceMarks(events, cars) {
+  const byName = Object.fromEntries(cars.map((c) => [c.car_name, c]));
+  return events
+    .filter((e) => byName[e.car])
+    .map((e) => {
+      const car = byName[e.car];
+      const pose = Laps.poseAt(car.trace, e.t);
+      const blamed = e.kind === "overtake" || e.at_fault;
+      return Object.assign({}, e, {
+        x: pose.x,
+        y: pose.y,
+        color: blamed ? car.color : "#9aa0a6",
+        label: e.kind === "contact" && e.at_fault ? `${carLabel(car)} at fault` : null,
+      });
+    });
+}
+
+function shownMarks() {
+  return player.marks.filter((m) => m.t <= player.time);
+}
+
+function nameOf(name) {
+  const car = player.cars.find((c) => c.car_name === name);
+  return car ? carLabel(car) : name;
+}
+
+function eventText(e) {
+  const at = `at ${e.t.toFixed(1)} s`;
+  if (e.kind === "overtake") return `${nameOf(e.car)} passed ${nameOf(e.other)} ${at}`;
+  if (e.at_fault) return `contact ${nameOf(e.car)} → ${nameOf(e.other)} ${at}: ${nameOf(e.car)} at fault`;
+  return `contact ${nameOf(e.car)} – ${nameOf(e.other)} ${at}: nobody at fault`;
+}
+
+function eventList(marks) {
+  if (!marks.length) return [Slip.el("li", { class: "muted" }, "No overtakes or contacts.")];
+  return marks.map((m) =>
+    Slip.el(
+      "li",
+      { class: `race-event ${m.kind}`, "data-kind": m.kind, "data-car": m.car, "data-at-fault": String(m.at_fault) },
+      Slip.el("span", { class: "swatch", style: `background:${m.color}` }),
+      seekButton(eventText(m), Math.max(0, m.t - 1)),
+    ),
+  );
 }
 
 function trail(trace, time) {
@@ -227,11 +278,16 @@ function carPanel(car) {
     seekButton(`${inc.kind === "crash" ? "crash" : "off track"} at ${inc.t.toFixed(1)} s`, Math.max(0, inc.t - 1)),
   );
   const result = car.result;
+  const gap = result.gap_to_winner_ms === null ? "" : ` · gap +${(result.gap_to_winner_ms / 1000).toFixed(3)} s`;
+  const racing =
+    `overtakes ${result.overtakes} · overtaken ${result.times_overtaken} · ` +
+    `at-fault collisions ${result.at_fault_collisions} · laps led ${result.laps_led}${gap}`;
   return Slip.el(
     "div",
     { class: "car-card", "data-car": car.car_name },
     Slip.el("h3", {}, Slip.el("span", { class: "swatch", style: `background:${car.color}` }), `P${result.finish_position} ${carLabel(car)}`),
     Slip.el("p", { class: "muted" }, `${result.status} · ${result.laps} lap(s) · total ${Slip.ms(result.total_ms)} · penalties ${Slip.ms(result.penalty_ms)}`),
+    Slip.el("p", { class: "racing" }, racing),
     Slip.el("p", { class: "telemetry", id: `telemetry-${car.index}` }),
     laps,
     incidents.length ? Slip.el("p", { class: "incidents" }, ...incidents) : null,
@@ -266,7 +322,9 @@ async function start() {
     });
   const ends = player.cars.map((c) => c.trace.t[c.trace.t.length - 1]);
   player.raceDuration = Math.max(0, ...ends, player.bots.length * player.botDt);
+  player.marks = raceMarks(data.events || [], player.cars);
   player.view = new TrackView(document.getElementById("track-canvas"), geometry);
+  document.getElementById("race-events").replaceChildren(...eventList(player.marks));
   document.getElementById("cars").replaceChildren(...player.cars.map(carPanel));
   document.getElementById("ghost-car").replaceChildren(
     ...player.cars.map((c) => Slip.el("option", { value: c.index }, carLabel(c))),
@@ -279,6 +337,7 @@ async function start() {
 // For tests and the curious: where each car is drawn now.
 window.slipReplay = {
   positions: () => Object.fromEntries(player.cars.map((c) => [c.car_name, c.pose ? [c.pose.x, c.pose.y] : null])),
+  marks: () => shownMarks().map((m) => ({ t: m.t, kind: m.kind, car: m.car, other: m.other, at_fault: m.at_fault, label: m.label })),
   state: () => ({ time: player.time, duration: player.duration, playing: player.playing, speed: player.speed }),
 };
 

@@ -201,4 +201,42 @@ class TrackView {
     }
     ctx.restore();
   }
+
+  // A race event where it happened: an overtake is an upward triangle in the passing car's
+  // colour; a contact a diamond in the colour of the car at fault (grey when nobody was),
+  // labelled with that car's name.
+  drawRaceMark(mark, color, label) {
+    const ctx = this.ctx;
+    const [sx, sy] = this.toScreen(mark.x, mark.y);
+    const r = 8;
+    ctx.save();
+    ctx.lineWidth = 2;
+    ctx.strokeStyle = mark.kind === "contact" ? "#ff3b3b" : "#0b0b0b";
+    ctx.fillStyle = color;
+    ctx.beginPath();
+    if (mark.kind === "overtake") {
+      ctx.moveTo(sx, sy - r);
+      ctx.lineTo(sx + r, sy + r * 0.7);
+      ctx.lineTo(sx - r, sy + r * 0.7);
+    } else {
+      ctx.moveTo(sx, sy - r);
+      ctx.lineTo(sx + r, sy);
+      ctx.lineTo(sx, sy + r);
+      ctx.lineTo(sx - r, sy);
+    }
+    ctx.closePath();
+    ctx.fill();
+    ctx.stroke();
+    if (label) {
+      ctx.font = "600 11px system-ui, sans-serif";
+      ctx.textAlign = "left";
+      ctx.textBaseline = "middle";
+      ctx.lineWidth = 3;
+      ctx.strokeStyle = "rgba(0, 0, 0, 0.8)";
+      ctx.strokeText(label, sx + r + 3, sy);
+      ctx.fillStyle = "#fff";
+      ctx.fillText(label, sx + r + 3, sy);
+    }
+    ctx.restore();
+  }
 }
