@@ -241,8 +241,8 @@ def standings_table(info: dict, board: dict) -> Table:
     rated = board["race_type"] == "head_to_model"
     table = Table(title=f"{info['name']} ({info['race_type']}, {board['ranking_metric']} time)")
     columns = ["rank", "alias", "laps", "best s", "average s", "total s", "off-track"]
-    columns += ["collisions", "resets", "score s", "submissions"]
-    columns += ["mu", "sigma", "rating"] if rated else []
+    columns += ["collisions", "at fault", "resets", "score s", "submissions"]
+    columns += ["overtakes", "laps led", "mu", "sigma", "rating"] if rated else []
     for column in columns:
         table.add_column(column, justify="left" if column == "alias" else "right")
     for row in board["rows"]:
@@ -255,11 +255,13 @@ def standings_table(info: dict, board: dict) -> Table:
             _seconds(row["total_time_ms"]),
             str(row["off_track_count"]),
             str(row["collision_count"]),
+            str(row["at_fault_collisions"]),
             str(row["reset_count"]),
             _seconds(row["ranking_score_ms"]),
             str(row["submission_count"]),
         ]
         if rated:
+            cells += [str(row["overtakes"]), str(row["laps_led"])]
             cells += [f"{row[k]:.2f}" if row[k] is not None else "-" for k in ("mu", "sigma")]
             cells.append(f"{row['ordinal']:.2f}" if row["ordinal"] is not None else "-")
         table.add_row(*cells)
