@@ -45,11 +45,11 @@ from arena.spawn import (
     car_footprint,
     car_grid,
     grid_slots,
+    is_clear,
     obstacle_places,
     other_lane,
     rectangle,
     respawn_place,
-    room_around,
     start_arc,
 )
 from tracks.track import Projection
@@ -510,7 +510,7 @@ class RacingEnv(ParallelEnv):
             others = list(taken.values())
             if verdict.released:
                 live.hold, live.released_at = None, self.time
-                if room_around(here, others) >= RESPAWN_CLEARANCE_M:
+                if is_clear(here, others, RESPAWN_CLEARANCE_M):
                     taken[agent] = here
                     continue
                 spot = respawn_place(self.track, live.record.last_arc, verdict.offset, taken=others)
