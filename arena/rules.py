@@ -150,7 +150,8 @@ class RuleBook:
         rec.immobile_steps = rec.immobile_steps + 1 if m.moved <= IMMOBILE_METRES else 0
         rec.reversing_steps = rec.reversing_steps + 1 if delta < -1e-6 else 0
 
-        if rec.distance - rec.lap_start_distance >= self.track.length:
+        lap_done = rec.distance - rec.lap_start_distance >= self.track.length
+        if lap_done:
             self._complete_lap(rec, now)
             if rec.done:
                 return rec.status
@@ -165,7 +166,7 @@ class RuleBook:
         if now - rec.start_time >= self.time_limit_s - 1e-9:
             rec.status, rec.done, rec.truncated = "time_up", True, True
             return rec.status
-        rec.status = "in_progress"
+        rec.status = "lap_complete" if lap_done else "in_progress"
         return rec.status
 
     def _complete_lap(self, rec: CarRecord, now: float) -> None:

@@ -46,6 +46,16 @@ def test_lap_completes_when_progress_reaches_100_across_the_start_line() -> None
     assert statuses[:-1] == ["in_progress"] * 39
 
 
+def test_every_lap_of_a_multi_lap_race_is_marked_lap_complete() -> None:
+    rules = book(laps=3)
+    rec = rules.start(arc=0.0, now=0.0)
+    statuses, _ = drive(rules, rec, [0.5 * i for i in range(1, 121)])
+    marked = [i for i, status in enumerate(statuses) if status == "lap_complete"]
+    assert marked == [39, 79, 119]  # 20 m laps at 0.5 m a step
+    assert rec.laps == 3 and rec.done and rec.finished
+    assert statuses[40] == "in_progress"
+
+
 def test_progress_is_percent_of_lap_from_start_point() -> None:
     rules = book()
     rec = rules.start(arc=10.0, now=0.0)
