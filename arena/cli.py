@@ -54,6 +54,7 @@ def race_command(
 ) -> None:
     """Race built-in drivers on a track and print the results table."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from arena import make_config
@@ -63,7 +64,8 @@ def race_command(
 
     err = Console(stderr=True)
     if driver not in DRIVERS:
-        err.print(f"[red]error:[/] unknown driver {driver!r}; choose from {', '.join(DRIVERS)}")
+        choices = ", ".join(DRIVERS)
+        err.print(f"[red]error:[/] unknown driver {escape(repr(driver))}; choose from {choices}")
         raise typer.Exit(1)
     try:
         config = make_config(
@@ -78,7 +80,7 @@ def race_command(
         )
         race_track, _ = resolve_track(config)
     except (ConfigError, ValueError, KeyError) as exc:
-        err.print(f"[red]error:[/] {exc}")
+        err.print(f"[red]error:[/] {escape(str(exc))}")
         raise typer.Exit(1) from None
     policies = {}
     for i, car in enumerate(config.cars):
@@ -105,7 +107,7 @@ def race_command(
         try:
             result = run_race(config, policies, on_step=on_step)
         except (ConfigError, ValueError) as exc:
-            err.print(f"[red]error:[/] {exc}")
+            err.print(f"[red]error:[/] {escape(str(exc))}")
             raise typer.Exit(1) from None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -61,3 +61,13 @@ def test_race_json_and_bad_input() -> None:
     assert bad.exit_code == 1 and "race_type" in bad.output
     unknown = runner.invoke(app, ["race", "--track", "atlantis"])
     assert unknown.exit_code == 1 and "atlantis" in unknown.output
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["race", "--track", "[/bold]x"], ["race", "--driver", "[/bold]x"], ["tracks", "show", "[/]x"]],
+)
+def test_user_text_in_errors_is_printed_literally_not_as_markup(args: list[str]) -> None:
+    result = runner.invoke(app, args)
+    assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.exception
+    assert args[-1] in result.output

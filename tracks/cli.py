@@ -9,6 +9,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from tracks.catalog import Direction, builtin_names, get_track, import_track, list_tracks
@@ -23,7 +24,8 @@ JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON instead of 
 
 
 def _fail(message: str) -> typer.Exit:
-    Console(stderr=True, soft_wrap=True).print(f"[bold red]error:[/] {message}", highlight=False)
+    err = Console(stderr=True, soft_wrap=True)
+    err.print(f"[bold red]error:[/] {escape(message)}", highlight=False)
     return typer.Exit(1)
 
 
@@ -108,7 +110,8 @@ def show_command(
         _print_json(doc)
         return
     console = Console()
-    console.print(f"[bold]{track.display_name}[/] ({track.name}) {track.description}")
+    title = f"{escape(track.display_name)}[/] ({escape(track.name)}) {escape(track.description)}"
+    console.print(f"[bold]{title}")
     for key in ("source", "loop", "direction", "length", "width", "min_width", "max_width"):
         console.print(f"  {key.replace('_', ' ')}: {doc[key]}")
     if line is not None:
@@ -168,7 +171,8 @@ def raceline_command(
         _print_json(doc)
         return
     console = Console()
-    console.print(f"[bold]{track.display_name}[/] ({track.name}, {track.direction})")
+    name = escape(track.display_name)
+    console.print(f"[bold]{name}[/] ({escape(track.name)}, {track.direction})")
     console.print(f"  length {track.length:.2f} m, width {track.width:.2f} m")
     console.print(f"  physical-limit lap time: [bold]{line.lap_time:.3f} s[/]")
     console.print(f"  centre line at the limit: {centre.lap_time:.3f} s")

@@ -47,6 +47,8 @@ def test_no_server_errors(league: League) -> None:
     record(league, event["id"], {entry["entry_id"]: car("fuzz")})
     schema = schemathesis.openapi.from_url(f"{league.url}/openapi.json")
     operations = [result.ok() for result in schema.get_all_operations()]
+    # Rotating the admin's token would turn every later operation into a 401: it goes last.
+    operations.sort(key=lambda op: op.path == "/api/racers/me/token")
     failures: list[str] = []
     counted = 0
     for operation in operations:
