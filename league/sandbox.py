@@ -6,6 +6,8 @@ address space at fork plus the memory allowance), ``RLIMIT_CPU`` and asks to be 
 the worker dies; the parent enforces the wall-clock limit with SIGKILL. The child's answer
 comes back as JSON over a pipe (never pickle), capped in size. Any way the child can fail
 becomes a :class:`SandboxError` whose message says which limit was hit.
+:func:`limit_self` is the limits part alone, also used by the upload validation child
+(:mod:`league.validation`).
 """
 
 from __future__ import annotations
@@ -23,9 +25,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from submissions.format import MEMORY_WORDS
+
 MiB = 1024 * 1024
+ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+"""Variables that hold BLAS and OpenMP libraries to one thread in a child process."""
 _PR_SET_PDEATHSIG = 1
-_MEMORY_WORDS = ("MemoryError", "bad_alloc", "bad allocation", "Failed to allocate", "std::bad")
+
+
+
+def one_thread_env() -> dict[str, str]:
+    """This process's environment with every :data:`ONE_THREAD` variable set to 1."""
+    return {**os.environ, **dict.fromkeys(ONE_THREAD, "1")}
 
 
 @dataclass(frozen=True)
@@ -56,21 +67,29 @@ def _die_with_parent() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
+def limit_self(limits: SandboxLimits) -> None:
+    """Put this process under ``limits``: killed if its parent dies, one BLAS thread,
+    ``RLIMIT_AS`` its address space now plus ``memory_mb``, ``RLIMIT_CPU`` the CPU time it
+    has used so far plus ``cpu_seconds``."""
+    faulthandler.disable()  # a crash is reported by the parent, not as a stack dump
+    _die_with_parent()
+    for name in ONE_THREAD:
+        os.environ[name] = "1"
+    cap = _address_space() + limits.memory_mb * MiB
+    resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = int(usage.ru_utime + usage.ru_stime) + limits.cpu_seconds
+    resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 2))
+
+
 def _child(target: Callable[[], Any], fd: int, limits: SandboxLimits) -> None:
     """Child side: limits on, run ``target``, write ``{"ok": ...}`` or ``{"error": ...}``."""
     try:
-        faulthandler.disable()  # a crash is reported by the parent, not as a stack dump
-        _die_with_parent()
-        for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            os.environ[name] = "1"
-        cap = _address_space() + limits.memory_mb * MiB
-        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
-        cpu = limits.cpu_seconds
-        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 2))
+        limit_self(limits)
         payload: dict[str, Any] = {"ok": target()}
     except BaseException as exc:  # everything becomes an answer
         text = f"{type(exc).__name__}: {exc}"
-        memory = isinstance(exc, MemoryError) or any(w in text for w in _MEMORY_WORDS)
+        memory = isinstance(exc, MemoryError) or any(w in text for w in MEMORY_WORDS)
         payload = {"error": "memory" if memory else "error", "message": text[:2000]}
     try:
         data = json.dumps(payload, separators=(",", ":")).encode()

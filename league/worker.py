@@ -6,7 +6,10 @@ that starts N such processes (``python -m league.worker``) with one BLAS/OpenMP 
 and restarts any that die. While a race runs the worker heartbeats its lease; the result,
 its per-car rows, the trace and the rating update are written in one transaction that
 begins by marking the job done *if this lease still holds it*, so a worker whose lease
-expired can never record a second result.
+expired can never record a second result. A result whose trace cannot be stored (disk full,
+read-only) fails that attempt with the ``OSError`` on the job, which is requeued while
+attempts remain; the worker carries on. A model file that no longer matches its sha256 is
+not raced: its job fails.
 """
 
 from __future__ import annotations
@@ -41,12 +44,11 @@ from league.queue import (
     lease_job,
 )
 from league.ranking import rate_race
-from league.sandbox import SandboxError, SandboxLimits, run_limited
+from league.sandbox import SandboxError, SandboxLimits, one_thread_env, run_limited
 from league.settings import Settings
-from league.storage import Storage
+from league.storage import Storage, StorageError
 
 log = logging.getLogger("slipstream.worker")
-THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 class LeaseLost(RuntimeError):
@@ -162,16 +164,22 @@ class Worker:
             self._fail(holder[0], f"error: the race answer was malformed ({exc})")
             return
         entry_ids = {car.name: car.entry_id for car in plan.cars if car.entry_id}
-        if self._retry_db(
-            lambda s: record_result(s, self.storage, holder[0], result, entry_ids) is not None
-        ):
+        try:
+            recorded = self._retry_db(
+                lambda s: record_result(s, self.storage, holder[0], result, entry_ids) is not None
+            )
+        except StorageError as exc:  # disk full or read-only: a later attempt may succeed
+            self._fail(holder[0], f"storage: {exc}", retry=True)
+            return
+        if recorded:
             log.info("job %d done", lease.job_id)
         else:
             log.warning("job %d: lease lost before recording; result dropped", lease.job_id)
 
-    def _fail(self, lease: Lease, error: str) -> None:
-        """Fail the job for good: a race that cannot run will not run on a retry either."""
-        self._retry_db(lambda session: fail_job(session, lease, error, retry=False))
+    def _fail(self, lease: Lease, error: str, retry: bool = False) -> None:
+        """Record ``error`` on the job and fail it for good (a race that cannot run will not
+        run on a retry either), or with ``retry`` requeue it while attempts remain."""
+        self._retry_db(lambda session: fail_job(session, lease, error, retry=retry))
         log.warning("job %d failed: %s", lease.job_id, error)
 
     def _ticker(self, holder: list[Lease]) -> Callable[[], None]:
@@ -216,7 +224,7 @@ class Worker:
 
 def spawn(index: int) -> subprocess.Popen:
     """Start one worker process with one BLAS/OpenMP thread (settings from the environment)."""
-    env = {**os.environ, **dict.fromkeys(THREAD_VARS, "1")}
+    env = one_thread_env()
     name = f"{socket.gethostname()}-{os.getpid()}-{index}"
     return subprocess.Popen([sys.executable, "-m", "league.worker", "--name", name], env=env)
 

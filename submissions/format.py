@@ -30,6 +30,8 @@ CONTINUOUS_OUTPUT: OutputConvention = "action"
 
 MiB = 1024 * 1024
 KiB = 1024
+MEMORY_WORDS = ("MemoryError", "bad_alloc", "bad allocation", "Failed to allocate", "std::bad")
+"""Words in an error's text that say it ran out of memory (onnxruntime, C++, Python)."""
 
 
 class Limits(BaseModel):
@@ -50,6 +52,8 @@ class Limits(BaseModel):
     max_opset: int = Field(default=21, ge=1)
     max_nodes: int = Field(default=2000, gt=0)
     max_parameters: int = Field(default=25_000_000, gt=0)
+    max_computed_bytes: int = Field(default=256 * MiB, gt=0)
+    max_step_macs: int = Field(default=2_000_000_000, gt=0)
     smoke_batch_sizes: tuple[int, ...] = (1, 3, 8)
     smoke_seed: int = 0
     latency_warmup_runs: int = Field(default=5, ge=0)

@@ -5,20 +5,32 @@ from __future__ import annotations
 import re
 from typing import Annotated
 
-from fastapi import APIRouter, File, Form, HTTPException, Path, Response, UploadFile
+from fastapi import (
+    APIRouter,
+    Depends,
+    File,
+    Form,
+    HTTPException,
+    Path,
+    Request,
+    Response,
+    UploadFile,
+)
+from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
+from pydantic import TypeAdapter, ValidationError
 from sqlalchemy import select
 
 from league import crud
 from league.api.deps import SessionDep, SettingsDep, StorageDep
 from league.auth import CurrentRacer, OptionalRacer
 from league.models import Model, Racer
-from league.schemas import MAX_ID, ErrorOut, ModelOut
-from submissions import Limits, validate
+from league.schemas import MAX_ID, ErrorOut, ModelName, ModelOut
+from league.validation import RETRY_AFTER_SECONDS, UploadValidator, ValidationBusy
 
 router = APIRouter(prefix="/api/models", tags=["models"])
 ModelId = Annotated[int, Path(ge=1, le=MAX_ID)]
-NAME = re.compile(r"^[A-Za-z0-9_.\- ]{1,64}$")
+MODEL_NAME = TypeAdapter(ModelName)
 
 
 def model_out(model: Model, owner_view: bool) -> ModelOut:
@@ -39,13 +51,16 @@ def model_out(model: Model, owner_view: bool) -> ModelOut:
 
 def _name(given: str | None, filename: str | None) -> str:
     if given is not None:
-        if not NAME.match(given):
-            raise HTTPException(
-                422, "A model name is 1-64 letters, digits, spaces, '_', '.' or '-'."
-            )
-        return given
+        try:
+            return MODEL_NAME.validate_python(given)
+        except ValidationError as exc:
+            raise HTTPException(422, f"name: {exc.errors()[0]['msg']}") from None
     stem = re.sub(r"[^A-Za-z0-9_.\-]", "_", (filename or "model").rsplit(".", 1)[0])[:64]
     return stem or "model"
+
+
+def _upload_validator(request: Request) -> UploadValidator:
+    return request.app.state.upload_validator
 
 
 @router.post(
@@ -56,25 +71,32 @@ def _name(given: str | None, filename: str | None) -> str:
         200: {"model": ModelOut, "description": "The same file was uploaded before"},
         413: {"model": ErrorOut, "description": "File too large"},
         422: {"model": ErrorOut, "description": "The validator's problems"},
+        503: {"model": ErrorOut, "description": "Validation is busy; retry after Retry-After s"},
     },
 )
-def upload_model(
+async def upload_model(
     file: Annotated[UploadFile, File(description="A submission archive (.zip)")],
     racer: CurrentRacer,
     session: SessionDep,
     settings: SettingsDep,
     storage: StorageDep,
+    validator: Annotated[UploadValidator, Depends(_upload_validator)],
     response: Response,
     name: Annotated[str | None, Form(description="Display name; default: the file name")] = None,
 ) -> ModelOut | JSONResponse:
-    """Upload a model. It is validated; the same file twice gives the same model (200)."""
+    """Upload a model. It is validated in a child process (a few at once: 503 with
+    Retry-After when all are busy); the same file twice gives the same model (200)."""
     model_name = _name(name, file.filename)
-    data = file.file.read(settings.max_upload_bytes + 1)
-    if len(data) > settings.max_upload_bytes:
-        raise HTTPException(
-            413, f"The model file is larger than the limit of {settings.max_upload_bytes} bytes."
-        )
-    report = validate(data, Limits(max_archive_bytes=settings.max_upload_bytes))
+    try:
+        async with validator.slot():
+            data = await file.read(settings.max_upload_bytes + 1)
+            if len(data) > settings.max_upload_bytes:
+                limit = settings.max_upload_bytes
+                raise HTTPException(413, f"The model file is over the limit of {limit} bytes.")
+            report = await validator.validate(data)
+    except ValidationBusy as exc:
+        headers = {"Retry-After": str(RETRY_AFTER_SECONDS)}
+        raise HTTPException(503, f"{exc} Try again later.", headers=headers) from None
     if not report.ok or report.info is None:
         count = len(report.problems)
         return JSONResponse(
@@ -84,10 +106,12 @@ def upload_model(
                 "problems": [p.model_dump() for p in report.problems],
             },
         )
-    model, new = crud.add_model(session, storage, racer, model_name, data, report.info)
+    model, new = await run_in_threadpool(
+        crud.add_model, session, storage, racer, model_name, data, report.info
+    )
     if not new:
         response.status_code = 200
-    return model_out(model, owner_view=True)
+    return await run_in_threadpool(model_out, model, True)
 
 
 @router.get("", response_model=list[ModelOut])

@@ -5,8 +5,12 @@ from __future__ import annotations
 import json
 import os
 import struct
+import subprocess
+import sys
 import warnings
 import zipfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +19,7 @@ from onnx import TensorProto, helper
 
 from submissions import Limits, Problem, ValidationReport, validate
 from submissions.onnx_checks import ALLOWED_OPS
+from tests.submissions.hostile_models import wide_mlp
 from tests.submissions.test_support import (
     CONTINUOUS,
     DISCRETE,
@@ -421,7 +426,40 @@ def test_nan_outputs() -> None:
 def test_too_slow() -> None:
     report = validate(VALID, Limits(max_latency_ms=1e-6))
     assert [p.field for p in report.problems] == ["policy.onnx:latency"]
+    assert "ms of CPU time per step" in report.problems[0].expected
     assert report.info is not None and report.info.latency_ms > 0
+
+
+@contextmanager
+def busy_cpu(hogs: int) -> Iterator[None]:
+    """This process and ``hogs`` busy-looping processes, all pinned to one CPU."""
+    mine = os.sched_getaffinity(0)
+    cpu = {min(mine)}
+    loops = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(hogs)]
+    try:
+        for loop in loops:
+            os.sched_setaffinity(loop.pid, cpu)
+        os.sched_setaffinity(0, cpu)
+        yield
+    finally:
+        os.sched_setaffinity(0, mine)
+        for loop in loops:
+            loop.kill()
+            loop.wait()
+
+
+def test_speed_verdict_survives_a_busy_machine() -> None:
+    """A policy well inside the limit stays inside while three processes share its CPU.
+
+    Wall time under this load was about 10x the unloaded figure; CPU time stays within
+    about 3x (caches and frequency still move it), so a 4x limit tells the two apart.
+    """
+    policy = wide_mlp(2048)
+    alone = validate(policy).info.latency_ms
+    limits = Limits(max_latency_ms=4 * alone)
+    with busy_cpu(hogs=3):
+        report = validate(policy, limits)
+    assert report.ok, (alone, report.problems)
 
 
 def test_run_without_policy_skips_behaviour() -> None:
