@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -12,12 +14,16 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from league.api import events, health, jobs, models, racers, races, tracks
 from league.api.events import LeaderboardCache
-from league.bodylimit import BodyLimitMiddleware
+from league.bodylimit import BodyLimitMiddleware, BodyRule
 from league.db import make_engine, make_session_factory
 from league.ratelimit import RateLimitMiddleware
+from league.security import SecurityHeadersMiddleware
 from league.settings import Settings
-from league.storage import Storage
+from league.storage import Storage, StorageError
+from league.sweep import sweep
+from league.validation import UploadValidator
 from league.web import STATIC_DIR
+from league.web import docs as web_docs
 from league.web import model_data as web_model_data
 from league.web import routes as web_routes
 
@@ -48,6 +54,20 @@ def _install_error_handlers(app: FastAPI) -> None:
         ]
         return JSONResponse({"detail": _describe(exc), "errors": errors}, status_code=422)
 
+    @app.exception_handler(StorageError)
+    async def storage_error(request: Request, exc: StorageError) -> JSONResponse:
+        log.error("file store failed on %s %s: %s", request.method, request.url.path, exc)
+        detail = (
+            "The server's file store is full"
+            if exc.full
+            else "The server cannot write to its file store right now"
+        )
+        return JSONResponse(
+            {"detail": f"{detail}; nothing was saved. Try again later."},
+            status_code=507 if exc.full else 503,
+            headers={"Retry-After": "60"},
+        )
+
     @app.exception_handler(Exception)
     async def server_error(request: Request, exc: Exception) -> JSONResponse:
         log.exception("unhandled error on %s %s", request.method, request.url.path)
@@ -55,6 +75,33 @@ def _install_error_handlers(app: FastAPI) -> None:
             {"detail": "The server failed on this request; the error was logged."},
             status_code=500,
         )
+
+
+def _install_middleware(app: FastAPI, settings: Settings) -> None:
+    """Outermost first: security headers, rate limit, body limits (the last added runs first)."""
+    upload = BodyRule(
+        settings.max_upload_bytes + MULTIPART_OVERHEAD, settings.upload_timeout_seconds
+    )
+    app.add_middleware(
+        BodyLimitMiddleware,
+        default=BodyRule(settings.max_body_bytes, settings.body_timeout_seconds),
+        routes={("POST", app.url_path_for("upload_model")): upload},
+    )
+    app.add_middleware(
+        RateLimitMiddleware, rate=settings.rate_limit_per_second, burst=settings.rate_limit_burst
+    )
+    app.add_middleware(SecurityHeadersMiddleware)
+
+
+@asynccontextmanager
+async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
+    """At start, sweep the file store of crash leftovers and unreferenced files."""
+    state = app.state
+    try:
+        sweep(state.session_factory, state.storage, state.settings.orphan_grace_seconds)
+    except Exception:  # a sweep that fails must not keep the server down
+        log.exception("start-up sweep of the file store failed; serving anyway")
+    yield
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -66,20 +113,21 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         title="Slipstream league",
         version="1",
         description="Racers upload models, enter events and read leaderboards and races.",
+        lifespan=_lifespan,
+        docs_url=None,  # league.web.docs renders /docs itself: no CDN, no script
+        redoc_url=None,
     )
     app.state.settings = settings
     app.state.engine = engine
     app.state.session_factory = make_session_factory(engine)
     app.state.storage = Storage(settings.storage_dir)
     app.state.leaderboards = LeaderboardCache()
+    app.state.upload_validator = UploadValidator(settings)
     for module in (health, racers, models, events, jobs, races, tracks, web_model_data):
         app.include_router(module.router)
     app.include_router(web_routes.router)
+    app.include_router(web_docs.router)
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     _install_error_handlers(app)
-    body_cap = settings.max_upload_bytes + MULTIPART_OVERHEAD
-    app.add_middleware(BodyLimitMiddleware, max_bytes=body_cap)
-    app.add_middleware(
-        RateLimitMiddleware, rate=settings.rate_limit_per_second, burst=settings.rate_limit_burst
-    )
+    _install_middleware(app, settings)
     return app

@@ -1,4 +1,5 @@
-"""API tokens: 32 random bytes shown once, stored only as their sha256.
+"""API tokens: 32 random bytes shown once, stored only as their sha256 (or, once revoked,
+as a value no token hashes to).
 
 FastAPI dependencies resolve the bearer token to a :class:`~league.models.Racer`:
 ``current_racer`` (401 without a valid token), ``optional_racer`` and ``admin_racer``
@@ -20,7 +21,9 @@ from sqlalchemy.orm import Session
 from league.api.deps import SessionDep
 from league.models import Racer
 
-bearer = HTTPBearer(auto_error=False, description="The API token from `create-racer`.")
+bearer = HTTPBearer(
+    auto_error=False, description="The API token from `create-racer` or `rotate-token`."
+)
 
 
 def new_token() -> str:
@@ -33,6 +36,15 @@ def hash_token(token: str) -> str:
     return hashlib.sha256(token.encode("utf-8", "surrogatepass")).hexdigest()
 
 
+def revoked_hash() -> str:
+    """A stored token hash that no token matches, for a revoked token.
+
+    ``hash_token`` only yields hex digits; this value starts with ``revoked:``, so no
+    digest ever equals it, and its random part keeps the unique column unique.
+    """
+    return "revoked:" + secrets.token_urlsafe(32)
+
+
 def racer_for_token(session: Session, token: str) -> Racer | None:
     """The racer holding ``token``, or None; the final comparison is constant-time."""
     digest = hash_token(token)
@@ -40,6 +52,11 @@ def racer_for_token(session: Session, token: str) -> Racer | None:
     if racer is None or not hmac.compare_digest(racer.token_hash, digest):
         return None
     return racer
+
+
+def invalid_token() -> HTTPException:
+    """The 401 for a token that matches nobody (unknown, rotated away or revoked)."""
+    return HTTPException(401, "The API token is not valid.", headers={"WWW-Authenticate": "Bearer"})
 
 
 def optional_racer(
@@ -52,9 +69,7 @@ def optional_racer(
         return None
     racer = racer_for_token(session, credentials.credentials)
     if racer is None:
-        raise HTTPException(
-            401, "The API token is not valid.", headers={"WWW-Authenticate": "Bearer"}
-        )
+        raise invalid_token()
     request.state.racer_id = racer.id
     return racer
 

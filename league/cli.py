@@ -8,7 +8,9 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
+from rich.text import Text
 
 if TYPE_CHECKING:
     from sqlalchemy.orm import Session
@@ -33,6 +35,12 @@ def _settings(data_dir: Path | None) -> Settings:
     from league.settings import Settings
 
     return Settings(data_dir=data_dir) if data_dir is not None else Settings()
+
+
+def _fail(message: object) -> typer.Exit:
+    """Print ``message`` in red, literally (never as markup); the exit to raise (status 1)."""
+    console.print(Text(str(message), style="red"))
+    return typer.Exit(1)
 
 
 def _migrated_session(data_dir: Path | None) -> Session:
@@ -85,11 +93,45 @@ def create_racer(
         try:
             racer, token = crud.create_racer(session, spec.alias, spec.admin)
         except crud.Conflict as exc:
-            console.print(f"[red]{exc}[/red]")
-            raise typer.Exit(1) from None
-    console.print(f"racer [bold]{racer.alias}[/bold] (id {racer.id}, {racer.role})")
+            raise _fail(exc) from None
+    console.print(f"racer [bold]{escape(racer.alias)}[/bold] (id {racer.id}, {racer.role})")
     console.print("API token (shown once, keep it safe):")
     typer.echo(token)
+
+
+AliasArgument = Annotated[str, typer.Argument(help="The racer's alias.")]
+
+
+@app.command("rotate-token")
+def rotate_token(alias: AliasArgument, data_dir: DataDir = None) -> None:
+    """Give a racer a new API token (printed once); the old or revoked one stops working."""
+    from league import crud
+
+    with _migrated_session(data_dir) as session:
+        try:
+            racer = crud.racer_by_alias(session, alias)
+        except crud.UnknownRacer as exc:
+            raise _fail(exc) from None
+        token = crud.rotate_token(session, racer)
+    if token is None:
+        raise _fail(f"The token of {alias!r} changed meanwhile; nothing was done, run this again.")
+    console.print(f"racer [bold]{escape(alias)}[/bold]: the old API token no longer works")
+    console.print("new API token (shown once, keep it safe):")
+    typer.echo(token)
+
+
+@app.command("revoke-token")
+def revoke_token(alias: AliasArgument, data_dir: DataDir = None) -> None:
+    """Make a racer's API token stop working; only rotate-token gives them a new one."""
+    from league import crud
+
+    with _migrated_session(data_dir) as session:
+        try:
+            crud.revoke_token(session, crud.racer_by_alias(session, alias))
+        except crud.UnknownRacer as exc:
+            raise _fail(exc) from None
+    console.print(f"racer [bold]{escape(alias)}[/bold]: API token revoked")
+    console.print(f"give them a new one with: slipstream league rotate-token {escape(alias)}")
 
 
 def _read_ruleset(path: Path) -> dict:
@@ -138,12 +180,11 @@ def create_event(
         with _migrated_session(data_dir) as session:
             event = crud.create_event(session, spec, created_by=None)
     except ValidationError as exc:
-        console.print(f"[red]{describe_validation_error(exc)}[/red]")
-        raise typer.Exit(1) from None
+        raise _fail(describe_validation_error(exc)) from None
     except ValueError as exc:
-        console.print(f"[red]{exc}[/red]")
-        raise typer.Exit(1) from None
-    console.print(f"event [bold]{event.id}[/bold]: {event.name} ({event.race_type}, {event.track})")
+        raise _fail(exc) from None
+    where = f": {event.name} ({event.race_type}, {event.track})"
+    console.print(Text.assemble("event ", (str(event.id), "bold"), where))
     console.print(f"ruleset hash {event.ruleset_hash}")
 
 
@@ -164,20 +205,20 @@ def submit(
         raise typer.Exit(2)
     report = validate(model)
     if not report.ok:
-        console.print(f"[red]{model} fails validation; nothing was uploaded:[/red]")
+        console.print(Text(f"{model} fails validation; nothing was uploaded:", style="red"))
         for problem in report.problems:
-            console.print(f"  - {problem}")
+            console.print(Text(f"  - {problem}"))
         raise typer.Exit(1)
     try:
         with LeagueClient(server, token) as client:
             record = client.upload_model(model, name)
             entry = client.enter(event, record["id"])
     except LeagueError as exc:
-        console.print(f"[red]the server refused: {exc.message}[/red]")
+        console.print(Text(f"the server refused: {exc.message}", style="red"))
         for problem in exc.problems:
-            console.print(f"  - {problem.get('field')}: {problem.get('message')}")
+            console.print(Text(f"  - {problem.get('field')}: {problem.get('message')}"))
         raise typer.Exit(1) from None
-    console.print(f"model {record['id']} ({record['name']}) entered in event {event}")
+    console.print(Text(f"model {record['id']} ({record['name']}) entered in event {event}"))
     console.print(f"entry {entry['entry_id']}; jobs queued: {entry['job_ids']}")
 
 
@@ -198,8 +239,7 @@ def standings(
             info = client.event(event)
             board = client.leaderboard(event)
     except LeagueError as exc:
-        console.print(f"[red]{exc.message}[/red]")
-        raise typer.Exit(1) from None
+        raise _fail(exc.message) from None
     console.print(standings_table(info, board))
 
 
@@ -237,9 +277,11 @@ def worker(
 
 
 def standings_table(info: dict, board: dict) -> Table:
-    """An event's leaderboard (as the API returns it) as a Rich table."""
+    """An event's leaderboard (as the API returns it) as a Rich table; names and aliases
+    are shown literally, never read as Rich markup."""
     rated = board["race_type"] == "head_to_model"
-    table = Table(title=f"{info['name']} ({info['race_type']}, {board['ranking_metric']} time)")
+    title = f"{info['name']} ({info['race_type']}, {board['ranking_metric']} time)"
+    table = Table(title=Text(title))
     columns = ["rank", "alias", "laps", "best s", "average s", "total s", "off-track"]
     columns += ["collisions", "at fault", "resets", "score s", "submissions"]
     columns += ["overtakes", "laps led", "mu", "sigma", "rating"] if rated else []
@@ -248,7 +290,7 @@ def standings_table(info: dict, board: dict) -> Table:
     for row in board["rows"]:
         cells = [
             str(row["rank"]),
-            row["alias"],
+            Text(row["alias"]),
             str(row["lap_count"]),
             _seconds(row["best_lap_ms"]),
             _seconds(row["average_lap_ms"]),

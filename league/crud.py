@@ -15,7 +15,7 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from league.auth import hash_token, new_token
+from league.auth import hash_token, new_token, revoked_hash
 from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, utcnow
 from league.queue import evaluation_jobs
 from league.rulesets import event_config
@@ -31,6 +31,10 @@ class Conflict(ValueError):
     """The request clashes with what is stored (a duplicate, a closed event)."""
 
 
+class UnknownRacer(LookupError):
+    """No racer has the alias asked for."""
+
+
 def create_racer(session: Session, alias: str, admin: bool = False) -> tuple[Racer, str]:
     """Add a racer; return it and its API token (the only time the token is seen)."""
     token = new_token()
@@ -42,6 +46,37 @@ def create_racer(session: Session, alias: str, admin: bool = False) -> tuple[Rac
         session.rollback()
         raise Conflict(f"The alias {alias!r} is already taken.") from None
     return racer, token
+
+
+def racer_by_alias(session: Session, alias: str) -> Racer:
+    """The racer called ``alias``; :class:`UnknownRacer` if nobody is."""
+    racer = session.scalar(select(Racer).where(Racer.alias == alias))
+    if racer is None:
+        raise UnknownRacer(f"No racer has the alias {alias!r}.")
+    return racer
+
+
+def rotate_token(session: Session, racer: Racer) -> str | None:
+    """Give ``racer`` a new API token and return it (the only time it is seen); the token
+    stored when ``racer`` was read stops working at once, a revoked one included.
+
+    None when that stored token changed in between (another rotation or a revocation won):
+    of two rotations racing with one token, only one gets a token back.
+    """
+    token = new_token()
+    done = session.execute(
+        update(Racer)
+        .where(Racer.id == racer.id, Racer.token_hash == racer.token_hash)
+        .values(token_hash=hash_token(token))
+    )
+    session.commit()
+    return token if done.rowcount == 1 else None
+
+
+def revoke_token(session: Session, racer: Racer) -> None:
+    """Make ``racer``'s API token stop working; only :func:`rotate_token` gives them one again."""
+    racer.token_hash = revoked_hash()
+    session.commit()
 
 
 def create_event(session: Session, spec: EventCreate, created_by: int | None) -> Event:
@@ -78,11 +113,11 @@ def add_model(
     """Store a validated archive and its row; return the model and whether it is new.
 
     The file is fsynced and renamed into place before the row commits; if the commit fails
-    a file this call created is removed again, so a failure leaves neither behind.
+    a file this call created is removed again, so a failure leaves neither behind. When the
+    same owner's same file commits first in another request, that row is the answer.
     """
-    existing = session.scalar(
-        select(Model).where(Model.owner_id == owner.id, Model.sha256 == info.archive_sha256)
-    )
+    same = select(Model).where(Model.owner_id == owner.id, Model.sha256 == info.archive_sha256)
+    existing = session.scalar(same)
     if existing is not None:
         return existing, False
     sha256, created = storage.put("models", data)
@@ -96,8 +131,11 @@ def add_model(
         )
         session.add(model)
         session.commit()
-    except BaseException:
+    except BaseException as exc:
         session.rollback()
+        winner = session.scalar(same) if isinstance(exc, IntegrityError) else None
+        if winner is not None:  # the same upload raced this one and committed first
+            return winner, False
         if created and session.scalar(select(Model.id).where(Model.sha256 == sha256)) is None:
             storage.remove("models", sha256)
         raise

@@ -16,7 +16,7 @@ from sqlalchemy.orm import Session
 from arena.config import CarConfig, RaceConfig
 from arena.policy import Policy
 from league.models import Entry, Event, Job, Model
-from league.storage import Storage
+from league.storage import DigestMismatch, Storage
 
 BOTS = ("pursuit",)
 
@@ -60,6 +60,19 @@ def lineup(job: Job) -> list[dict[str, Any]]:
     return list(job.lineup or [])
 
 
+def checked_model_bytes(storage: Storage, model: Model) -> bytes:
+    """A model's stored archive, refused if it no longer matches the sha256 it was stored as.
+
+    The bytes checked are the bytes raced: the plan carries them into the sandbox.
+    """
+    try:
+        return storage.read("models", model.sha256)
+    except DigestMismatch:
+        raise DigestMismatch(
+            f"stored model file {model.id} does not match its sha256; refusing to race it"
+        ) from None
+
+
 def build_plan(session: Session, storage: Storage, job: Job) -> RacePlan:
     """The race for ``job``: event ruleset + cars (models' declared sensors) + job seed."""
     event = session.get_one(Event, job.event_id)
@@ -70,7 +83,7 @@ def build_plan(session: Session, storage: Storage, job: Job) -> RacePlan:
             entry = session.get_one(Entry, slot["entry_id"])
             model = session.get_one(Model, entry.model_id)
             cars.append(model_car(name, model.info))
-            plans.append(CarPlan(name, entry.id, model=storage.read("models", model.sha256)))
+            plans.append(CarPlan(name, entry.id, model=checked_model_bytes(storage, model)))
         else:
             if slot.get("bot") not in BOTS:
                 raise ValueError(f"unknown bot {slot.get('bot')!r} in job {job.id}")

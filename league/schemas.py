@@ -8,20 +8,30 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
 
 from arena.config import BotConfig, ObstacleConfig, Penalties, RaceType, SeedVariation
 from submissions import Problem
 
 MAX_ID = 2**31 - 1
-Alias = Annotated[str, Field(min_length=2, max_length=32, pattern=r"^[A-Za-z0-9_.\-]+$")]
 Metric = Literal["total", "best", "average"]
 
 
-def _printable(value: str) -> str:
-    if not value.strip() or any(not ch.isprintable() for ch in value):
-        raise ValueError("must be non-blank printable text")
+def clean_name(value: str) -> str:
+    """The one rule for a name a person chooses (racer alias, model name, event name): no
+    control or other invisible characters (newlines, tabs, NUL, bidi overrides...), spaces
+    around it trimmed, not blank. Returns the trimmed name; ``ValueError`` says what is wrong.
+    """
+    if any(not ch.isprintable() for ch in value):
+        raise ValueError("must not contain control or invisible characters (newline, tab, NUL...)")
+    value = value.strip(" ")
+    if not value:
+        raise ValueError("must not be blank")
     return value
+
+
+def _name_input(value: object) -> object:
+    return clean_name(value) if isinstance(value, str) else value
 
 
 def _utc(value: datetime) -> datetime:
@@ -31,8 +41,15 @@ def _utc(value: datetime) -> datetime:
         raise ValueError("is out of range once converted to UTC") from None
 
 
-Text = Annotated[str, Field(min_length=1), AfterValidator(_printable)]
 UtcTime = Annotated[datetime, AfterValidator(_utc)]
+# Chosen names: clean_name runs first, then the limits apply to the trimmed name.
+Alias = Annotated[
+    str,
+    Field(min_length=2, max_length=32, pattern=r"^[A-Za-z0-9_.\-]+$"),
+    BeforeValidator(_name_input),
+]
+ModelName = Annotated[str, Field(min_length=1, max_length=64), BeforeValidator(_name_input)]
+EventName = Annotated[str, Field(min_length=1, max_length=100), BeforeValidator(_name_input)]
 
 
 class ErrorOut(BaseModel):
@@ -67,7 +84,8 @@ class RacerOut(_Out):
 
 
 class RacerCreated(RacerOut):
-    """A new racer with their API token: shown once, never stored in clear."""
+    """A racer with their new API token (at creation or rotation): shown once, never stored
+    in clear."""
 
     token: str
 
@@ -95,7 +113,7 @@ class EventCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    name: Annotated[Text, Field(max_length=100)]
+    name: EventName
     race_type: RaceType = "time_trial"
     track: Annotated[str, Field(min_length=1, max_length=64)] = "beginner_loop"
     direction: Literal["ccw", "cw"] = "ccw"

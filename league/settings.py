@@ -20,6 +20,15 @@ class Settings(BaseSettings):
         default=None, description="SQLAlchemy URL; default: SQLite in the data directory."
     )
     max_upload_bytes: int = Field(default=50 * MiB, gt=0, description="Model upload cap.")
+    upload_timeout_seconds: float = Field(
+        default=300.0, gt=0.0, description="Time a model upload's body may take to arrive."
+    )
+    max_body_bytes: int = Field(
+        default=16 * 1024, gt=0, description="Body cap of every route but the model upload."
+    )
+    body_timeout_seconds: float = Field(
+        default=10.0, gt=0.0, description="Time any other request body may take to arrive."
+    )
     rate_limit_per_second: float = Field(
         default=50.0, ge=0.0, description="Sustained requests per client; 0 turns limiting off."
     )
@@ -32,10 +41,30 @@ class Settings(BaseSettings):
     race_memory_mb: int = Field(default=1024, gt=0, description="Race child address space.")
     race_cpu_seconds: int = Field(default=600, gt=0, description="Race child CPU time.")
     race_wall_seconds: float = Field(default=900.0, gt=0.0, description="Race wall time.")
+    validation_concurrency: int = Field(
+        default=2, gt=0, description="Uploads validated at once, each in its own child process."
+    )
+    validation_queue: int = Field(
+        default=8, ge=0, description="Uploads that may wait for a validation slot; more get 503."
+    )
+    validation_wait_seconds: float = Field(
+        default=30.0, gt=0.0, description="Longest wait for a validation slot before 503."
+    )
+    validation_cpu_seconds: int = Field(
+        default=10, gt=0, description="CPU time of one upload's validation child."
+    )
+    validation_wall_seconds: float = Field(
+        default=20.0, gt=0.0, description="Wall time of one upload's validation child."
+    )
     round_races_per_model: int = Field(
         default=2, ge=1, description="Head-to-model races per model per round (k)."
     )
     round_max_cars: int = Field(default=4, ge=2, le=6, description="Cars per head-to-model race.")
+    orphan_grace_seconds: float = Field(
+        default=600.0,
+        ge=0.0,
+        description="Temp and unreferenced files younger than this survive the start-up sweep.",
+    )
 
     @property
     def db_url(self) -> str:

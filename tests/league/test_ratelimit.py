@@ -1,10 +1,17 @@
-"""Rate limiting: the token bucket and a live server answering 429."""
+"""Rate limiting: the token bucket and a live server answering 429, keyed on whom."""
 
 from __future__ import annotations
 
-import httpx
+import secrets
 
+import httpx
+from sqlalchemy import update
+
+from league import crud
 from league.app import create_app
+from league.db import make_engine, make_session_factory
+from league.migrations import upgrade
+from league.models import Racer
 from league.ratelimit import TokenBucket
 from league.settings import Settings
 from tests.league.conftest import ServerThread, free_port
@@ -27,3 +34,39 @@ def test_server_answers_429_with_retry_after(tmp_path) -> None:
     assert codes.count(429) >= 2 and limited.status_code == 429
     assert int(limited.headers["retry-after"]) >= 1 and "Too many" in limited.json()["detail"]
     assert health.status_code == 200
+
+
+def test_random_tokens_share_the_address_bucket_and_racers_keep_theirs(tmp_path) -> None:
+    """Unknown bearer tokens are charged to the client address; a checked-out token to its racer."""
+    settings = Settings(data_dir=tmp_path, rate_limit_per_second=0.01, rate_limit_burst=20)
+    engine = make_engine(settings.db_url)
+    upgrade(engine)
+    sessions = make_session_factory(engine)
+    with sessions() as session:
+        racer, token = crud.create_racer(session, "alice")
+        racer_id = racer.id
+    alice = {"Authorization": f"Bearer {token}"}
+    app = create_app(settings)
+    with ServerThread(app, free_port()) as server, httpx.Client(base_url=server.url) as client:
+        assert client.get("/api/racers/me", headers=alice).status_code == 200
+        random_codes = [
+            client.get(
+                "/api/racers/me", headers={"Authorization": f"Bearer {secrets.token_urlsafe(32)}"}
+            ).status_code
+            for _ in range(40)
+        ]
+        anonymous = client.get("/api/events").status_code
+        alice_again = client.get("/api/racers/me", headers=alice).status_code
+        with sessions() as session:  # the token stops checking out (as after a rotation)
+            session.execute(update(Racer).where(Racer.id == racer_id).values(token_hash="0"))
+            session.commit()
+        alice_stale = client.get("/api/racers/me", headers=alice).status_code
+        alice_forgotten = client.get("/api/racers/me", headers=alice).status_code
+    app.state.engine.dispose()
+    engine.dispose()
+    assert random_codes[:19] == [401] * 19  # the address's burst, less alice's first request
+    assert set(random_codes[19:]) == {429}
+    assert anonymous == 429
+    assert alice_again == 200
+    assert alice_stale == 401  # still charged to alice, answered by auth
+    assert alice_forgotten == 429  # forgotten: back on the exhausted address bucket

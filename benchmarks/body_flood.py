@@ -1,0 +1,153 @@
+"""Anonymous oversized JSON bodies against a real server: its memory and ``/healthz`` meanwhile.
+
+Starts ``python -m league serve`` on loopback in a fresh data directory, then a separate
+load process that posts ``--clients`` anonymous JSON bodies of ``--mb`` MB at once to
+``POST /api/events/1/entries``. Meanwhile this process samples the server's RSS
+(``/proc/PID/status``) and times ``GET /healthz`` every 50 ms. Prints one table.
+
+    .venv/bin/python benchmarks/body_flood.py [--clients 8] [--mb 50]
+
+Run it from another tree (``PYTHONPATH=/other/tree``) to measure that tree's server.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import select
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+PATH = "/api/events/1/entries"
+CHUNK = 1024 * 1024
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def post(port: int, body: bytes) -> tuple[int, float]:
+    """Send ``body`` like a browser would: stop sending once the server answers."""
+    start = time.monotonic()
+    head = (
+        f"POST {PATH} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+        f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n"
+    )
+    with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
+        sock.sendall(head.encode())
+        try:
+            for offset in range(0, len(body), CHUNK):
+                if select.select([sock], [], [], 0)[0]:
+                    break  # answered early: the rest is not wanted
+                sock.sendall(body[offset : offset + CHUNK])
+        except OSError:
+            pass  # the server closed after answering
+        answer = sock.recv(64)
+    status = int(answer.split(b" ", 2)[1]) if answer else 0
+    return status, time.monotonic() - start
+
+
+def load(port: int, clients: int, megabytes: int) -> None:
+    """The load process: ``clients`` posts at once; prints their statuses and seconds."""
+    body = b'{"model_id": 1, "pad": "' + b"x" * (megabytes * 1_000_000 - 26) + b'"}'
+    results: list[tuple[int, float]] = []
+    threads = [
+        threading.Thread(target=lambda: results.append(post(port, body))) for _ in range(clients)
+    ]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    print(json.dumps(results))
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def healthz_seconds(port: int) -> float:
+    start = time.monotonic()
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+        sock.recv(64)
+    return time.monotonic() - start
+
+
+def wait_until_up(port: int, server: subprocess.Popen) -> None:
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if server.poll() is not None:
+            raise SystemExit("the server exited before answering")
+        try:
+            healthz_seconds(port)
+            return
+        except OSError:
+            time.sleep(0.1)
+    raise SystemExit("the server did not answer /healthz within 60 s")
+
+
+def measure(clients: int, megabytes: int) -> None:
+    port = free_port()
+    data_dir = tempfile.mkdtemp(prefix="body-flood-")
+    serve = [sys.executable, "-m", "league", "serve", "--port", str(port), "--data-dir", data_dir]
+    server = subprocess.Popen(serve, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        wait_until_up(port, server)
+        time.sleep(0.5)
+        idle = rss_mb(server.pid)
+        command = [sys.executable, __file__, "--load", str(port)]
+        command += ["--clients", str(clients), "--mb", str(megabytes)]
+        started = time.monotonic()
+        loader = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
+        peak, worst = idle, 0.0
+        while loader.poll() is None:
+            peak = max(peak, rss_mb(server.pid))
+            worst = max(worst, healthz_seconds(port))
+            time.sleep(0.05)
+        elapsed = time.monotonic() - started
+        results = json.loads(loader.stdout.read())
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    statuses = sorted({status for status, _ in results})
+    slowest = max(seconds for _, seconds in results)
+    print(f"{clients} anonymous {megabytes} MB JSON posts at once to POST {PATH}")
+    print(f"| {'measure':<32} | {'value':>12} |")
+    print(f"|{'-' * 34}|{'-' * 14}|")
+    rows = [
+        ("answers", ",".join(map(str, statuses))),
+        ("slowest answer (s)", f"{slowest:.2f}"),
+        ("whole flood (s)", f"{elapsed:.2f}"),
+        ("server RSS idle (MB)", f"{idle:.0f}"),
+        ("server RSS peak (MB)", f"{peak:.0f}"),
+        ("server RSS growth (MB)", f"{peak - idle:.0f}"),
+        ("worst /healthz meanwhile (s)", f"{worst:.3f}"),
+    ]
+    for name, value in rows:
+        print(f"| {name:<32} | {value:>12} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--clients", type=int, default=8)
+    parser.add_argument("--mb", type=int, default=50)
+    parser.add_argument("--load", type=int, help=argparse.SUPPRESS)  # the load process's port
+    args = parser.parse_args()
+    if args.load:
+        load(args.load, args.clients, args.mb)
+    else:
+        measure(args.clients, args.mb)
+
+
+if __name__ == "__main__":
+    main()
