@@ -34,7 +34,7 @@ from arena.lidar import (
     lidar_reach,
     sector_lidar,
 )
-from arena.params import ObjectsView, build_params, check_reward
+from arena.params import ObjectsView, build_params, check_reward, params_copy
 from arena.rewards import follow_center_line
 from arena.rules import REJOIN_S, CarRecord, ContactParty, EpisodeStatus, Measurement, RuleBook
 from arena.sensors_spec import IMAGE_SENSORS, observation_space
@@ -345,7 +345,9 @@ class RacingEnv(ParallelEnv):
             live = self._cars[agent]
             params = verdicts[agent].params
             fn = self._rewards[agent]
-            rewards[agent] = check_reward(fn(params), agent, live.record.steps, params)
+            # Like DeepRacer, the reward function gets its own copy: its edits stay its own.
+            reward = fn(params_copy(params))
+            rewards[agent] = check_reward(reward, agent, live.record.steps, params)
             terminations[agent] = live.record.done and not live.record.truncated
             truncations[agent] = live.record.truncated
             infos[agent] = self._info(agent, params, verdicts[agent].contacts)
@@ -423,6 +425,7 @@ class RacingEnv(ParallelEnv):
                 is_crashed=status == "crashed",
                 objects=self._objects_view(exclude=agent),
                 waypoints=self._waypoints,
+                sim_time=self.time,
             )
             verdicts[agent] = _Verdict(
                 params=params,
@@ -597,7 +600,7 @@ class RacingEnv(ParallelEnv):
             names.append(f"box{i}")
             bodies.append(o.body)
             locations.append((o.place.x, o.place.y))
-            headings.append(math.degrees(o.place.yaw))
+            headings.append(0.0)  # DeepRacer reports 0 for a static obstacle's heading
             speeds.append(0.0)
             boxes.append(Box3D(o.place.x, o.place.y, o.place.yaw, *o.size, gray=BOX_GRAY))
         movers = [(None, f"bot{i}", b.car, BOT_GRAY) for i, b in enumerate(self._bots)] + [
@@ -721,6 +724,7 @@ class RacingEnv(ParallelEnv):
             is_crashed=False,
             objects=self._objects_view(exclude=agent),
             waypoints=self._waypoints,
+            sim_time=self.time,
         )
 
     def _info(

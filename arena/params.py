@@ -1,7 +1,10 @@
 """Build DeepRacer's reward-function ``params`` dict for one car.
 
-Every key of racing-rules.md is present every step; the object keys appear only when
-the race has other objects (obstacles, bots or other cars).
+Every key of racing-rules.md, plus the community simapp's ``sim_time``, is present every
+step in every race type. Without other objects (obstacles, bots or other cars) the object
+keys carry DeepRacer's defaults: ``closest_objects`` ``[0, 0]``, ``object_in_camera``
+``False`` and empty ``objects_*`` lists. Like DeepRacer, which hands the reward function
+a deep copy, every dict built here and every :func:`params_copy` has its own lists.
 """
 
 from __future__ import annotations
@@ -109,6 +112,31 @@ def object_in_camera(x: float, y: float, yaw: float, location: Sequence[float]) 
     return abs(bearing) <= CAMERA_HALF_FOV_DEG
 
 
+# The params' list values. Their items are tuples or scalars (immutable), so copying the
+# lists copies the dict as deeply as DeepRacer's ``copy.deepcopy`` does.
+LIST_KEYS = (
+    "waypoints",
+    "closest_waypoints",
+    "closest_objects",
+    "objects_location",
+    "objects_left_of_center",
+    "objects_distance",
+    "objects_distance_from_center",
+    "objects_heading",
+    "objects_speed",
+)
+
+
+def params_copy(params: dict[str, Any]) -> dict[str, Any]:
+    """A copy of ``params`` that shares no list with it (what a reward function gets)."""
+    copy = params.copy()
+    for key in LIST_KEYS:
+        value = copy.get(key)
+        if value is not None:
+            copy[key] = value[:]
+    return copy
+
+
 def build_params(
     *,
     track: Track,
@@ -126,8 +154,12 @@ def build_params(
     is_crashed: bool,
     objects: ObjectsView,
     waypoints: list[tuple[float, float]],
+    sim_time: float,
 ) -> dict[str, Any]:
-    """The params dict for the car whose projection is row ``index`` of ``projection``."""
+    """The params dict for the car whose projection is row ``index`` of ``projection``.
+
+    ``waypoints`` is copied (the dict owns all its lists); ``sim_time`` is the simulated
+    seconds since the episode began."""
     x, y = float(model_point[0]), float(model_point[1])
     seg = int(projection.segment[index])
     params: dict[str, Any] = {
@@ -142,30 +174,28 @@ def build_params(
         "distance_from_center": float(projection.distance_from_center[index]),
         "track_width": float(projection.track_width[index]),
         "track_length": float(track.length),
-        "waypoints": waypoints,
+        "waypoints": waypoints[:],
         "closest_waypoints": [seg, seg + 1],
         "is_left_of_center": bool(projection.offset[index] > 0),
         "is_reversed": bool(is_reversed),
         "is_offtrack": bool(is_offtrack),
         "is_crashed": bool(is_crashed),
         "projection_distance": float(projection.arc_length[index]),
+        "sim_time": float(sim_time),
+        # DeepRacer's defaults when there are no objects; filled in below when there are.
+        "closest_objects": [0, 0],
+        "objects_location": list(objects.location),
+        "objects_left_of_center": list(objects.left_of_center),
+        "objects_distance": list(objects.distance),
+        "objects_distance_from_center": list(objects.distance_from_center),
+        "objects_heading": list(objects.heading_deg),
+        "objects_speed": list(objects.speed),
+        "object_in_camera": False,
     }
     if len(objects):
-        params.update(
-            {
-                "closest_objects": closest_objects(
-                    track, float(projection.arc_length[index]), objects.distance
-                ),
-                "objects_location": list(objects.location),
-                "objects_left_of_center": list(objects.left_of_center),
-                "objects_distance": list(objects.distance),
-                "objects_distance_from_center": list(objects.distance_from_center),
-                "objects_heading": list(objects.heading_deg),
-                "objects_speed": list(objects.speed),
-            }
-        )
-        ahead = params["closest_objects"][1]
-        params["object_in_camera"] = object_in_camera(x, y, yaw, objects.location[ahead])
+        nearest = closest_objects(track, float(projection.arc_length[index]), objects.distance)
+        params["closest_objects"] = nearest
+        params["object_in_camera"] = object_in_camera(x, y, yaw, objects.location[nearest[1]])
     return params
 
 

@@ -6,8 +6,8 @@ being in the other lane earns a bonus. Without objects (a time trial) it reduces
 "stay on the road".
 
 Params used: all_wheels_on_track, is_left_of_center, projection_distance, track_length,
-closest_objects, objects_distance, objects_left_of_center (object keys are present only
-when the race has objects).
+closest_objects, objects_distance, objects_left_of_center (without objects the lists are
+empty, as in DeepRacer).
 """
 
 LOOK_AHEAD = 1.5  # metres along the track at which an object starts to matter

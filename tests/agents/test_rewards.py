@@ -10,12 +10,15 @@ import pytest
 
 import arena
 from agents.rewards import (
+    CHECK_STEPS,
     RewardFunctionError,
     bundled_samples,
+    check_reward_episode,
     check_reward_function,
     load_reward_function,
     load_sample,
     resolve_reward,
+    sample_episode,
     sample_params,
 )
 
@@ -72,7 +75,6 @@ def test_samples_run_on_real_env_params(env_params, name: str, race_type: str) -
 def test_sample_params_have_the_env_keys(env_params) -> None:
     for race_type in RACE_TYPES:
         assert set(sample_params(race_type)) == set(env_params[race_type][0])
-    assert "objects_location" not in sample_params()
 
 
 def test_samples_prefer_what_they_document() -> None:
@@ -198,10 +200,12 @@ def test_missing_file_and_unknown_sample(tmp_path: Path) -> None:
 
 def test_object_race_smoke_test_catches_object_only_functions(tmp_path: Path) -> None:
     path = tmp_path / "boxes.py"
-    path.write_text("def reward_function(params):\n    return len(params['objects_location'])\n")
-    with pytest.raises(RewardFunctionError, match="objects_location"):
+    path.write_text(
+        "def reward_function(params):\n    return params['objects_distance'][1] > 0\n"
+    )
+    with pytest.raises(RewardFunctionError, match="at line 2"):
         load_reward_function(path)
-    assert load_reward_function(path, "object_avoidance")(sample_params("object_avoidance")) == 2
+    assert load_reward_function(path, "object_avoidance")(sample_params("object_avoidance"))
 
 
 def test_check_does_not_let_the_function_mutate_params() -> None:
@@ -224,3 +228,111 @@ def test_resolve_reward_takes_a_file_path_or_a_sample_name(tmp_path: Path) -> No
     assert sample(sample_params()) == load_sample("follow_center_line")(sample_params())
     with pytest.raises(RewardFunctionError, match="no sample reward function"):
         resolve_reward("no_such_sample")
+
+
+STATEFUL = """
+STATE = {}
+
+def reward_function(params):
+    if params["steps"] == 1:
+        STATE.clear()
+        STATE["start"] = params["progress"]
+        STATE["last_steps"] = 0
+    assert params["steps"] == STATE["last_steps"] + 1
+    STATE["last_steps"] = params["steps"]
+    gained = params["progress"] - STATE["start"]
+    return 1.0 + 0.01 * gained
+"""
+
+
+def test_state_set_on_the_first_step_is_accepted_and_runs_in_the_env(tmp_path: Path) -> None:
+    path = tmp_path / "stateful.py"
+    path.write_text(STATEFUL)
+    fn = load_reward_function(path)
+    env = arena.parallel_env(sensors=("sector_lidar",), reward_function=fn, seed=3)
+    try:
+        env.reset(seed=3)
+        for _ in range(12):
+            actions = {a: 0 for a in env.agents}
+            _, rewards, _, _, _ = env.step(actions)
+            assert all(math.isfinite(r) and r >= 1.0 for r in rewards.values())
+    finally:
+        env.close()
+
+
+def test_sample_episode_is_the_start_of_an_episode() -> None:
+    for race_type in RACE_TYPES:
+        episode = sample_episode(race_type)
+        assert [p["steps"] for p in episode] == list(range(1, CHECK_STEPS + 1))
+        progress = [p["progress"] for p in episode]
+        assert 0.0 < progress[0] < 5.0 and progress == sorted(set(progress))
+        assert {p["track_length"] for p in episode} == {episode[0]["track_length"]}
+        assert set(episode[0]) == set(sample_params(race_type))
+
+
+def test_a_function_that_raises_later_in_the_episode_is_refused_with_its_line(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "late.py"
+    path.write_text(
+        "def reward_function(params):\n"
+        "    if params['steps'] == 3:\n"
+        "        raise RuntimeError('third step')\n"
+        "    return 1.0\n"
+    )
+    with pytest.raises(RewardFunctionError) as info:
+        load_reward_function(path)
+    message = str(info.value)
+    assert "raised RuntimeError: third step at line 3" in message
+    assert "steps=3" in message and str(path) in message
+
+
+def test_numpy_scipy_and_shapely_are_available_to_reward_functions(tmp_path: Path) -> None:
+    path = tmp_path / "libs.py"
+    path.write_text(
+        "import numpy as np\n"
+        "from scipy.spatial import distance\n"
+        "from shapely.geometry import LineString, Point\n\n"
+        "def reward_function(params):\n"
+        "    line = LineString(params['waypoints'])\n"
+        "    car = Point(params['x'], params['y'])\n"
+        "    car_xy = np.array([params['x'], params['y']])\n"
+        "    gap = distance.euclidean(car_xy, params['waypoints'][0])\n"
+        "    return float(1.0 / (1.0 + line.distance(car) + 0.0 * gap))\n"
+    )
+    fn = load_reward_function(path)
+    assert 0.0 < fn(sample_params()) <= 1.0
+
+
+@pytest.mark.parametrize(
+    ("returned", "accepted"),
+    [
+        ("float('nan')", False),
+        ("float('-inf')", False),
+        ("[1.0]", False),
+        ("True", True),
+        ("__import__('numpy').float32(0.5)", True),
+        ("3", True),
+    ],
+)
+def test_return_values_are_judged_as_deepracer_judges_them(
+    tmp_path: Path, returned: str, accepted: bool
+) -> None:
+    path = tmp_path / "value.py"
+    path.write_text(f"def reward_function(params):\n    return {returned}\n")
+    if accepted:
+        load_reward_function(path)
+    else:
+        with pytest.raises(RewardFunctionError, match=r"finite|must return a number"):
+            load_reward_function(path)
+
+
+def test_training_starts_with_module_state_untouched_by_the_check(tmp_path: Path) -> None:
+    path = tmp_path / "counter.py"
+    path.write_text(
+        "CALLS = []\n\ndef reward_function(params):\n"
+        "    CALLS.append(params['steps'])\n    return float(len(CALLS))\n"
+    )
+    fn = load_reward_function(path)
+    assert fn(sample_params()) == 1.0
+    assert check_reward_episode(fn, sample_episode()) == [2.0, 3.0, 4.0, 5.0, 6.0]

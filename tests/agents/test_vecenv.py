@@ -86,11 +86,13 @@ def test_camera_and_continuous_actions():
 
 def test_reward_errors_surface_from_workers(tmp_path):
     bad = tmp_path / "reward.py"
-    bad.write_text("def reward_function(params):\n    return 1.0 / (params['steps'] - 1)\n")
+    # Fine on the load-time pre-check's steps 1-5, dividing by zero on step 9 of the race.
+    bad.write_text("def reward_function(params):\n    return 1.0 / (params['steps'] - 9)\n")
     env = RacingVecEnv(_config(sensors=("lidar",)), str(bad), num_races=1, num_workers=0)
     try:
         with pytest.raises(RuntimeError, match="ZeroDivisionError"):
-            env.step(_one_hot(env, 4))
+            for _ in range(9):
+                env.step(_one_hot(env, 4))
     finally:
         env.close()
 
