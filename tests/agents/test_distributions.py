@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import torch
-from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
-from tensordict import TensorDict
 from torch.distributions import Categorical
 
 from agents.distributions import CategoricalDistribution
+from tests.agents.bandit import Bandit, ppo_config
 
 CLASS_NAME = "agents.distributions:CategoricalDistribution"
 
@@ -57,62 +56,11 @@ def test_deterministic_output_is_argmax_one_hot() -> None:
     assert torch.equal(dist.as_deterministic_output_module()(logits), expected)
 
 
-class _Bandit(VecEnv):
-    """One-step episodes; action 2 of 3 pays 1, the others 0."""
-
-    def __init__(self, num_envs: int = 64) -> None:
-        self.num_envs = num_envs
-        self.num_actions = 3
-        self.max_episode_length = 1
-        self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long)
-        self.device = "cpu"
-        self.cfg = {}
-
-    def get_observations(self) -> TensorDict:
-        return TensorDict({"policy": torch.ones(self.num_envs, 2)}, batch_size=[self.num_envs])
-
-    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        assert actions.shape == (self.num_envs, 3)
-        rewards = (actions.argmax(dim=-1) == 2).float()
-        dones = torch.ones(self.num_envs, dtype=torch.bool)
-        return self.get_observations(), rewards, dones, {}
-
-
-def _runner_cfg() -> dict:
-    return {
-        "num_steps_per_env": 8,
-        "save_interval": 1000,
-        "obs_groups": {"actor": ["policy"], "critic": ["policy"]},
-        "multi_gpu": None,
-        "logger": "tensorboard",
-        "algorithm": {
-            "class_name": "PPO",
-            "learning_rate": 3e-3,
-            "num_learning_epochs": 4,
-            "num_mini_batches": 2,
-            "clip_param": 0.2,
-            "gamma": 0.99,
-            "lam": 0.95,
-            "entropy_coef": 0.0,
-            "value_loss_coef": 1.0,
-            "max_grad_norm": 1.0,
-            "schedule": "fixed",
-            "desired_kl": 0.01,
-        },
-        "actor": {
-            "class_name": "MLPModel",
-            "hidden_dims": [16],
-            "activation": "elu",
-            "distribution_cfg": {"class_name": CLASS_NAME},
-        },
-        "critic": {"class_name": "MLPModel", "hidden_dims": [16], "activation": "elu"},
-    }
-
-
 def test_rsl_rl_ppo_learns_a_bandit_with_it(capsys) -> None:
     torch.manual_seed(0)
-    env = _Bandit()
-    runner = OnPolicyRunner(env, _runner_cfg(), log_dir=None, device="cpu")
+    env = Bandit(num_envs=64)
+    config = ppo_config(CLASS_NAME, epochs=4, save_interval=1000)
+    runner = OnPolicyRunner(env, config, log_dir=None, device="cpu")
     actor = runner.alg.get_policy()
     assert isinstance(actor.distribution, CategoricalDistribution)
     obs = env.get_observations()
