@@ -16,8 +16,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from agents.model_metadata import training_metadata
 from agents.settings import RESUME_OVERRIDES, TrainSettings, load_settings
-from arena.sensors_spec import IMAGE_SENSORS
+from arena.sensors_spec import DEEPRACER_SENSOR, IMAGE_SENSORS, check_sensors
 
 if TYPE_CHECKING:
     from agents.metrics import IterationStats
@@ -53,6 +54,26 @@ def _default(name: str) -> Any:
     return TrainSettings.model_fields[name].default
 
 
+def _sensors(option: str | None, action_space: str) -> tuple[str, ...]:
+    """``--sensors``, else those of a ``model_metadata.json`` action space, else the default.
+
+    ``--sensors`` that disagree with the metadata file's ``sensor`` list are an error naming
+    both, as are sensors no car can carry.
+    """
+    given = tuple(s.strip() for s in option.split(",") if s.strip()) if option else ()
+    meta = training_metadata(action_space)
+    if meta is None:
+        return check_sensors(given or _default("sensors"))
+    if given and set(check_sensors(given)) != set(meta.sensors):
+        in_file = [DEEPRACER_SENSOR[s] for s in meta.sensors]
+        raise ValueError(
+            f"--sensors {','.join(given)} conflicts with {action_space}'s sensor {in_file} "
+            f"({','.join(meta.sensors)} here): drop --sensors to train with the file's sensors, "
+            "or change the file"
+        )
+    return meta.sensors
+
+
 def _settings(out: Path, resume: bool, options: dict[str, Any]) -> TrainSettings:
     """The run's settings from the options named after its fields (command-line forms parsed).
 
@@ -66,7 +87,7 @@ def _settings(out: Path, resume: bool, options: dict[str, Any]) -> TrainSettings
     if reward_fn.endswith(".py") or Path(reward_fn).exists():
         reward_fn = str(Path(reward_fn).resolve())
     parsed = {
-        "sensors": tuple(s.strip() for s in options["sensors"].split(",") if s.strip()),
+        "sensors": _sensors(options["sensors"], options["action_space"]),
         "action_space": parse_action_space_spec(options["action_space"]),
         "reward_fn": reward_fn,
         "opponent": tuple(str(Path(p).resolve()) for p in options["opponent"] or ()),
@@ -78,8 +99,9 @@ def _settings(out: Path, resume: bool, options: dict[str, Any]) -> TrainSettings
 def train(
     out: Annotated[Path, typer.Option(help="Run folder, e.g. runs/NAME.")],
     track: Annotated[str, _setting("track")] = _default("track"),
+    direction: Annotated[str | None, _setting("direction")] = _default("direction"),
     race_type: Annotated[str, _setting("race_type")] = _default("race_type"),
-    sensors: Annotated[str, _setting("sensors")] = ",".join(_default("sensors")),
+    sensors: Annotated[str | None, _setting("sensors")] = None,
     action_space: Annotated[str, _setting("action_space")] = "default",
     reward_fn: Annotated[str, _setting("reward_fn")] = _default("reward_fn"),
     minutes: Annotated[float | None, _setting("minutes")] = _default("minutes"),
@@ -113,9 +135,15 @@ def train(
     options["device"] = _device(device)
     try:
         settings = _settings(out, resume, options)
-        hp = Hyperparameters.load(hyperparameters) if hyperparameters else None
-        if resume and hp is None and (out / "ip" / "hyperparameters.json").exists():
-            hp = Hyperparameters.load(out / "ip" / "hyperparameters.json")
+        hp = None
+        if hyperparameters:
+            hp, ignored = Hyperparameters.read(hyperparameters)
+            if ignored:
+                console.print(
+                    f"[yellow]warning:[/] {escape(str(hyperparameters))}: ignoring "
+                    f"{escape(', '.join(ignored))} (not DeepRacer hyperparameters; "
+                    "DeepRacer ignores them too)"
+                )
         trainer = Trainer(settings, out, hp, clone=clone, resume=resume)
     except (ValueError, ValidationError, FileNotFoundError) as exc:
         _fail(str(exc))
@@ -158,6 +186,10 @@ def train(
 def evaluate_command(
     run: Annotated[Path, typer.Argument(help="Run folder.")],
     track: Annotated[str | None, typer.Option(help="Track (default: the run's).")] = None,
+    direction: Annotated[
+        str | None,
+        typer.Option(help="ccw or cw (default: the run's on its track, else the file's)."),
+    ] = None,
     laps: Annotated[int, typer.Option(help="Laps.")] = 3,
     race_type: Annotated[str | None, typer.Option(help="Race type (default: the run's).")] = None,
     seed: Annotated[int, typer.Option(help="Race seed.")] = 0,
@@ -165,21 +197,28 @@ def evaluate_command(
 ) -> None:
     """Race a trained run, print the results table and write a replay GIF."""
     from agents import evaluate
-    from agents.train import load_actor
+    from agents.train import load_actor, run_hyperparameters
 
     try:
         actor, settings = load_actor(run)
+        stack_size = run_hyperparameters(run).stack_size
     except (FileNotFoundError, ValueError) as exc:
         _fail(f"cannot load {run}: {exc}")
-    config = evaluate.evaluation_config(
-        track or settings.track,
-        race_type or settings.race_type,
-        settings.sensors,
-        settings.action_space,
-        laps=laps,
-        seed=seed,
-        time_limit_s=time_limit,
-    )
+    try:
+        config = evaluate.evaluation_config(
+            track or settings.track,
+            race_type or settings.race_type,
+            settings.sensors,
+            settings.action_space,
+            laps=laps,
+            seed=seed,
+            time_limit_s=time_limit,
+            direction=direction
+            or (settings.direction if track in (None, settings.track) else None),
+            stack_size=stack_size,
+        )
+    except ValueError as exc:
+        _fail(str(exc))
     folder = evaluate.evaluation_dir(run)
     race = evaluate.evaluate_policy(
         config, evaluate.TorchPolicy(actor, settings.discrete), folder / "replay.gif"

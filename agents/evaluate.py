@@ -14,11 +14,12 @@ import torch
 from rich.table import Table
 
 import arena
+from agents.deepracer_metrics import write_evaluation_metrics
 from agents.networks import observation_groups
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.config import RaceConfig, resolve_track
 from arena.race import RaceResult, run_race
-from arena.simtrace import race_rows, write_simtrace
+from arena.simtrace import lap_rows, write_simtrace
 
 
 class TorchPolicy:
@@ -51,10 +52,13 @@ def evaluation_config(
     seed: int = 0,
     time_limit_s: float = 180.0,
     num_cars: int | None = None,
+    direction: str | None = None,
+    stack_size: int = 1,
 ) -> RaceConfig:
-    """A race-mode config for evaluating one trained policy."""
-    return arena.make_config(
+    """A race-mode config for evaluating one trained policy (``direction``: the file's)."""
+    config = arena.make_config(
         track=track,
+        direction=direction,
         race_type=race_type,
         num_cars=num_cars,
         sensors=tuple(sensors),
@@ -64,6 +68,15 @@ def evaluation_config(
         laps=laps,
         time_limit_s=time_limit_s,
     )
+    return with_stack_size(config, stack_size)
+
+
+def with_stack_size(config: RaceConfig, stack_size: int) -> RaceConfig:
+    """``config`` with every car's observations stacking ``stack_size`` frames."""
+    if all(car.stack_size == stack_size for car in config.cars):
+        return config
+    cars = tuple(car.model_validate({**dict(car), "stack_size": stack_size}) for car in config.cars)
+    return config.model_copy(update={"cars": cars})
 
 
 def evaluate_policy(
@@ -103,12 +116,17 @@ def evaluation_dir(run_dir: Path) -> Path:
         stamp = datetime.fromtimestamp(stamp.timestamp() + 1)
 
 
-def write_evaluation(run_dir: Path, result: RaceResult, folder: Path | None = None) -> Path:
-    """Write the evaluation simtrace (first car) in deepracer-for-cloud's layout."""
+def write_evaluation(
+    run_dir: Path, result: RaceResult, folder: Path | None = None, metrics: bool = True
+) -> Path:
+    """Write the evaluation simtrace (first car; one episode per lap, as DeepRacer) in
+    deepracer-for-cloud's layout, and with ``metrics`` its ``EvaluationMetrics`` file."""
     folder = folder or evaluation_dir(run_dir)
     car = result.config.cars[0].name
-    rows = race_rows(result, car, episode=0, wall_clock=time.time())
+    rows = lap_rows(result, car, wall_clock=time.time())
     write_simtrace(folder / "evaluation-simtrace" / "0-iteration.csv", rows)
+    if metrics:
+        write_evaluation_metrics(run_dir, result, car)
     return folder
 
 

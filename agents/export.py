@@ -2,9 +2,9 @@
 
 The graph takes one input per sensor, named after it, with a leading batch dimension:
 raw ``uint8`` HWC images (cast, scaled to ``[0, 1]`` and transposed inside the graph) and
-float32 lidar vectors. Its one output is ``(batch, n)`` logits for a discrete space or
-``(batch, 2)`` mean actions clipped to ``[-1, 1]`` for a continuous one
-(``docs/model-format.md``).
+float32 lidar vectors, each holding ``stack_size`` frames along its last axis. Its one
+output is ``(batch, n)`` logits for a discrete space or ``(batch, 2)`` mean actions clipped
+to ``[-1, 1]`` for a continuous one (``docs/model-format.md``).
 """
 
 from __future__ import annotations
@@ -57,13 +57,18 @@ class SubmissionPolicy(nn.Module):
 
 
 def example_inputs(
-    sensors: tuple[str, ...], lidar: LidarConfig | None = None, batch: int = 1, seed: int = 0
+    sensors: tuple[str, ...],
+    lidar: LidarConfig | None = None,
+    batch: int = 1,
+    seed: int = 0,
+    stack_size: int = 1,
 ) -> dict[str, np.ndarray]:
-    """Random valid raw observations (uint8 images, float32 vectors) with a batch dim."""
+    """Random valid raw observations (uint8 images, float32 vectors, ``stack_size`` frames
+    stacked) with a batch dim."""
     rng = np.random.default_rng(seed)
     out = {}
     for name in check_sensors(sensors):
-        space = sensor_space(name, lidar)
+        space = sensor_space(name, lidar, stack_size)
         if name in IMAGE_SENSORS:
             out[name] = rng.integers(0, 256, (batch, *space.shape), dtype=np.uint8)
         else:
@@ -77,12 +82,14 @@ def export_onnx(
     sensors: tuple[str, ...] | list[str],
     action_space: DiscreteActionSpace | ContinuousActionSpace,
     lidar: LidarConfig | None = None,
+    stack_size: int = 1,
 ) -> bytes:
     """ONNX bytes of the actor in the submission convention (dynamic batch)."""
     sensors = check_sensors(sensors)
     module = SubmissionPolicy(actor, sensors, isinstance(action_space, DiscreteActionSpace))
     module = module.to("cpu").eval()
-    examples = tuple(torch.from_numpy(a) for a in example_inputs(sensors, lidar, 2).values())
+    inputs = example_inputs(sensors, lidar, 2, stack_size=stack_size)
+    examples = tuple(torch.from_numpy(a) for a in inputs.values())
     dims = tuple({0: torch.export.Dim.DYNAMIC} for _ in examples)
     logging.getLogger("torch.onnx").setLevel(logging.ERROR)
     with (
@@ -117,6 +124,7 @@ def pack_model(
     training_summary: dict[str, Any],
     reward_source: str | None,
     metrics_csv: Path | None,
+    stack_size: int = 1,
 ) -> Path:
     """Pack ``model.zip`` with ``submissions.pack``."""
     return pack(
@@ -130,4 +138,5 @@ def pack_model(
         reward_function=reward_source,
         metrics_csv=metrics_csv if metrics_csv is not None and metrics_csv.exists() else None,
         network_preset=network_preset,
+        stack_size=stack_size,
     )

@@ -12,7 +12,9 @@ import math
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from arena.config import validation_problems
 
 # Fixed in DeepRacer's clipped-PPO preset (not user settings there either).
 PPO_CLIP = 0.2
@@ -31,7 +33,7 @@ HUBER_CRITICS = {
 class Hyperparameters(BaseModel):
     """DeepRacer hyperparameters, by their ``hyperparameters.json`` names and defaults."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="ignore", frozen=True)
 
     batch_size: int = Field(default=64, ge=1, le=4096)
     beta_entropy: float = Field(default=0.01, ge=0.0, le=1.0)
@@ -43,15 +45,35 @@ class Hyperparameters(BaseModel):
     lr: float = Field(default=3e-4, gt=0.0, le=1e-2)
     num_episodes_between_training: int = Field(default=20, ge=1, le=1000)
     num_epochs: int = Field(default=10, ge=1, le=100)
-    stack_size: Literal[1] = 1
+    stack_size: int = Field(default=1, ge=1, le=8)
     term_cond_avg_score: float = 350.0
     term_cond_max_episodes: int = Field(default=100000, ge=1)
     sac_alpha: float = Field(default=0.2, ge=0.0)
 
     @classmethod
+    def read(cls, path: str | Path) -> tuple[Hyperparameters, list[str]]:
+        """Read a DeepRacer ``hyperparameters.json``: the settings, and the keys it ignored.
+
+        Like DeepRacer, it reads the keys it knows and ignores the rest (``learning_rate``,
+        ...); a known key with a bad value is a ``ValueError`` naming the key.
+        """
+        path = Path(path)
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ValueError(f"{path} is not valid JSON: {exc}") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"{path} must hold a JSON object, got {data!r:.80}")
+        try:
+            hp = cls.model_validate(data)
+        except ValidationError as exc:
+            raise ValueError(f"{path}: {validation_problems(exc)}") from None
+        return hp, sorted(data.keys() - cls.model_fields.keys())
+
+    @classmethod
     def load(cls, path: str | Path) -> Hyperparameters:
-        """Read a DeepRacer ``hyperparameters.json`` (unknown keys are refused)."""
-        return cls.model_validate_json(Path(path).read_text())
+        """Read a DeepRacer ``hyperparameters.json``, ignoring keys it does not know."""
+        return cls.read(path)[0]
 
     def write(self, run_dir: str | Path) -> Path:
         """Write ``RUN/ip/hyperparameters.json`` with DeepRacer's key names."""

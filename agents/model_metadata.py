@@ -18,6 +18,7 @@ from pydantic import ValidationError
 
 from agents.action_spaces import ActionSpace, ActionSpaceError, action_space_from_json
 from arena.actions import DiscreteActionSpace, to_deepracer_metadata
+from arena.config import validation_problems
 from arena.sensors_spec import DEEPRACER_SENSOR, FROM_DEEPRACER_SENSOR, LidarConfig, check_sensors
 
 DEEPRACER_VERSION = "5"
@@ -78,8 +79,7 @@ def _lidar_config(raw: Any) -> LidarConfig | None:
     try:
         return LidarConfig.model_validate(raw)
     except ValidationError as exc:
-        problems = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in exc.errors())
-        raise ModelMetadataError(f"lidar_config: {problems}") from None
+        raise ModelMetadataError(f"lidar_config: {validation_problems(exc)}") from None
 
 
 def metadata_from_dict(data: Any) -> DeepRacerMetadata:
@@ -129,6 +129,32 @@ def read_model_metadata(path: str | Path) -> DeepRacerMetadata:
     except json.JSONDecodeError as exc:
         raise ModelMetadataError(f"{path} is not valid JSON: {exc}") from None
     return metadata_from_dict(data)
+
+
+def training_metadata(spec: str) -> DeepRacerMetadata | None:
+    """The ``model_metadata.json`` an action-space spec names, or ``None`` for other specs.
+
+    A file is metadata when it holds a JSON object with an ``action_space`` key (a bare
+    action-space file is not). Training runs clipped PPO only, so a file asking for SAC is
+    refused with a :class:`ModelMetadataError` that says so.
+    """
+    path = Path(spec.strip())
+    if path.suffix.lower() != ".json" or not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None  # the action-space parser reports unreadable files
+    if not isinstance(data, dict) or "action_space" not in data:
+        return None
+    meta = metadata_from_dict(data)
+    if meta.training_algorithm == "sac":
+        raise ModelMetadataError(
+            f"{path} asks for training_algorithm 'sac', but Slipstream trains with clipped PPO "
+            "only (rsl-rl has no SAC); set \"training_algorithm\": \"clipped_ppo\" in the file "
+            "to train this action space with PPO"
+        )
+    return meta
 
 
 def write_model_metadata(path: str | Path, meta: DeepRacerMetadata) -> Path:

@@ -62,12 +62,16 @@ def deepracer_network_name(preset: str) -> str:
 
 
 def example_observations(
-    sensors: tuple[str, ...] | list[str], lidar: LidarConfig | None = None, batch: int = 1
+    sensors: tuple[str, ...] | list[str],
+    lidar: LidarConfig | None = None,
+    batch: int = 1,
+    stack_size: int = 1,
 ) -> TensorDict:
-    """Zero observations of the right group shapes (images as ``C x H x W`` floats)."""
+    """Zero observations of the right group shapes (images as ``C x H x W`` floats, the
+    ``stack_size`` frames' channels stacked)."""
     groups = {}
     for name in check_sensors(sensors):
-        shape = sensor_space(name, lidar).shape
+        shape = sensor_space(name, lidar, stack_size).shape
         if name in IMAGE_SENSORS:
             shape = (shape[2], shape[0], shape[1])
         groups[name] = torch.zeros((batch, *shape))
@@ -132,6 +136,7 @@ def build_actor(
     sensors: tuple[str, ...] | list[str],
     action_space: DiscreteActionSpace | ContinuousActionSpace,
     lidar: LidarConfig | None = None,
+    stack_size: int = 1,
 ) -> torch.nn.Module:
     """A fresh actor model (outside a runner), e.g. to load a checkpoint for evaluation."""
     from rsl_rl.utils import resolve_callable
@@ -139,5 +144,5 @@ def build_actor(
     actor_cfg, _, obs_groups = model_configs(preset, sensors, action_space)
     cfg = dict(actor_cfg)
     model_class = resolve_callable(cfg.pop("class_name"))
-    obs = example_observations(sensors, lidar)
+    obs = example_observations(sensors, lidar, stack_size=stack_size)
     return model_class(obs, obs_groups, "actor", num_actions(action_space), **cfg)

@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from arena.actions import ActionSpace, DiscreteActionSpace
 from arena.config import RACE_TYPES, RaceType
+from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
@@ -34,9 +35,14 @@ class TrainSettings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     track: str = Field("beginner_loop", description="Track name.")
+    direction: Direction | None = Field(
+        None, description="ccw or cw (default: the way the track's file runs)."
+    )
     race_type: RaceType = Field("time_trial", description=" | ".join(RACE_TYPES))
     sensors: tuple[str, ...] = Field(
-        ("camera",), description="Sensors; on the command line comma-separated, e.g. camera,lidar."
+        ("camera",),
+        description="Sensors; on the command line comma-separated, e.g. camera,lidar "
+        "(default: the sensors of a model_metadata.json action space, else camera).",
     )
     action_space: ActionSpace = Field(
         description="Action space; on the command line a spec, e.g. 3x3@1.0 or default."

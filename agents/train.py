@@ -9,6 +9,8 @@ Run layout (``RUN`` = the output folder)::
     RUN/0/training-simtrace/<iteration>-iteration.csv
     RUN/evaluation-<YYYYMMDDHHMMSS>/evaluation-simtrace/0-iteration.csv
     RUN/metrics.csv, RUN/reward_graph.png           console-style metrics and graph
+    RUN/metrics/TrainingMetrics.json                DeepRacer's per-episode metrics
+    RUN/training_params.yaml                        WORLD_NAME (the track) and race type
     RUN/checkpoints/last.pt                         state dicts (torch, weights_only)
     RUN/tensorboard/                                rsl-rl's TensorBoard events
 """
@@ -28,6 +30,7 @@ import torch
 import arena
 from agents import evaluate, export, networks, plots
 from agents.checkpoint import checkpoint, checkpoint_path, read_checkpoint, write_checkpoint
+from agents.deepracer_metrics import TrainingMetricsLog, write_training_params
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.metrics import IterationStats, append_metrics
@@ -77,12 +80,19 @@ class Trainer:
     ) -> None:
         self.settings = settings
         self.run_dir = Path(run_dir)
-        self.hp = hyperparameters or Hyperparameters()
+        self.hp = hyperparameters or (run_hyperparameters(run_dir) if resume else Hyperparameters())
         self.clone = Path(clone) if clone else None
         self.resume = resume
+        self.dr_metrics = TrainingMetricsLog(self.run_dir, resume=resume)
         networks.check_preset(settings.preset, settings.sensors)
         get_track(settings.track)  # raises TrackNotFoundError (a ValueError)
         resolve_reward(settings.reward_fn, settings.race_type)  # fail early, in this process
+        run_stack = run_hyperparameters(self.run_dir).stack_size if resume else self.hp.stack_size
+        if self.hp.stack_size != run_stack:
+            raise ValueError(
+                f"cannot resume {self.run_dir} with stack_size {self.hp.stack_size}: "
+                f"its network reads {run_stack} stacked frames"
+            )
         self.start_iteration = 0
         self.elapsed_before = 0.0
         self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
@@ -102,17 +112,21 @@ class Trainer:
         )
         (self.run_dir / "model").mkdir(exist_ok=True)
         write_model_metadata(self.run_dir / "model" / "model_metadata.json", meta)
+        reverse = s.direction not in (None, get_track(s.track).direction)
+        write_training_params(self.run_dir, s.track, s.race_type, reverse)
 
     def _make_env(self) -> tuple[RacingVecEnv, OpponentPool | None]:
         s = self.settings
         config = arena.make_config(
             track=s.track,
+            direction=s.direction,
             race_type=s.race_type,
             sensors=s.sensors,
             action_space=s.action_space,
             mode="training",
             seed=s.seed + 100_003 * _rank(),
         )
+        config = evaluate.with_stack_size(config, self.hp.stack_size)
         pool = None
         learners = None
         if s.race_type == "head_to_model" and (s.selfplay == "pool" or s.opponent):
@@ -188,7 +202,7 @@ class Trainer:
         finally:
             env.close()
         if self.writes_run_folder and checkpoint_path(self.run_dir).exists():
-            result.model_zip = self._package(runner, result)
+            result.model_zip = self._package(result)
         return result
 
     def _loop(
@@ -268,12 +282,14 @@ class Trainer:
             self._update_pool(pool, runner, it, episodes)
         if self.writes_run_folder:
             self._write_training_simtrace(it, simtrace)
+            self.dr_metrics.add_training(episodes)
         evaluation = self._evaluate(runner) if self._evaluation_due(it) else None
         stats = IterationStats.of_iteration(
             it, elapsed, len(simtrace), episodes, losses, evaluation
         )
         if self.writes_run_folder:
             self._write_metrics(stats)
+            self.dr_metrics.write()
         return stats
 
     def _write_training_simtrace(self, it: int, rows: list[dict[str, Any]]) -> None:
@@ -314,12 +330,15 @@ class Trainer:
             laps=s.eval_laps,
             seed=s.seed,
             time_limit_s=s.eval_time_limit,
+            stack_size=self.hp.stack_size,
+            direction=s.direction,
         )
         policy = evaluate.TorchPolicy(runner.alg.get_policy(), s.discrete)
         reward = resolve_reward(s.reward_fn, s.race_type)
         race = evaluate.evaluate_policy(config, policy, reward_function=reward)
         runner.alg.train_mode()
-        evaluate.write_evaluation(self.run_dir, race)
+        evaluate.write_evaluation(self.run_dir, race, metrics=False)
+        self.dr_metrics.add_evaluation(race)
         return evaluate.summary(race)
 
     def _record(self, result: TrainResult, stats: IterationStats) -> None:
@@ -336,36 +355,64 @@ class Trainer:
     # -------------------------------------------------------------- outputs
     def _graph(self, runner: RacingRunner) -> bytes:
         s = self.settings
-        return export.export_onnx(runner.alg.get_policy(), s.sensors, s.action_space)
+        policy = runner.alg.get_policy()
+        return export.export_onnx(policy, s.sensors, s.action_space, stack_size=self.hp.stack_size)
 
-    def _package(self, runner: RacingRunner, result: TrainResult) -> Path:
-        s = self.settings
-        ckpt = read_checkpoint(self.run_dir)
-        runner.alg.load(ckpt, {"actor": True}, strict=True)
-        reward_source = Path(s.reward_fn).read_text() if s.reward_fn.endswith(".py") else None
-        return export.pack_model(
-            self.run_dir / "model" / "model.zip",
-            self._graph(runner),
-            s.action_space,
-            s.sensors,
-            neural_network=networks.deepracer_network_name(s.preset),
-            network_preset=s.preset,
-            lidar=None,
-            training_summary={
-                "track": s.track,
-                "race_type": s.race_type,
-                "iterations": int(ckpt["iteration"]) + 1,
-                "minutes": round(float(ckpt["elapsed_s"]) / 60.0, 2),
-                **({"best_lap": result.best_lap} if result.best_lap is not None else {}),
-            },
-            reward_source=reward_source,
-            metrics_csv=self.run_dir / "metrics.csv",
-        )
+    def _package(self, result: TrainResult) -> Path:
+        best = {"best_lap": result.best_lap} if result.best_lap is not None else {}
+        return pack_run(self.run_dir, self.run_dir / "model" / "model.zip", best)
+
+def _load_run(run_dir: str | Path, device: str) -> tuple[torch.nn.Module, TrainSettings, dict]:
+    """A run's actor (weights of ``checkpoints/last.pt``), settings and checkpoint."""
+    settings = load_settings(run_dir)
+    stack_size = run_hyperparameters(run_dir).stack_size
+    actor = networks.build_actor(
+        settings.preset, settings.sensors, settings.action_space, stack_size=stack_size
+    )
+    checkpoint = read_checkpoint(run_dir, device)
+    actor.load_state_dict(checkpoint["actor_state_dict"])
+    return actor.to(device).eval(), settings, checkpoint
 
 
 def load_actor(run_dir: str | Path, device: str = "cpu") -> tuple[torch.nn.Module, TrainSettings]:
     """A run's trained actor (from ``checkpoints/last.pt``) and its settings."""
-    settings = load_settings(run_dir)
-    actor = networks.build_actor(settings.preset, settings.sensors, settings.action_space)
-    actor.load_state_dict(read_checkpoint(run_dir, device)["actor_state_dict"])
-    return actor.to(device).eval(), settings
+    actor, settings, _ = _load_run(run_dir, device)
+    return actor, settings
+
+
+def pack_run(run_dir: str | Path, out: str | Path, summary: dict[str, Any] | None = None) -> Path:
+    """Pack a run's last checkpoint as a submission at ``out`` (not validated here).
+
+    The archive holds the exported actor, the run's DeepRacer metadata, its reward file
+    when it still exists, ``metrics.csv`` and a training summary (plus ``summary``).
+    """
+    run_dir = Path(run_dir)
+    actor, s, ckpt = _load_run(run_dir, "cpu")
+    stack_size = run_hyperparameters(run_dir).stack_size
+    reward = Path(s.reward_fn)
+    metrics = run_dir / "metrics.csv"
+    return export.pack_model(
+        out,
+        export.export_onnx(actor, s.sensors, s.action_space, stack_size=stack_size),
+        s.action_space,
+        s.sensors,
+        neural_network=networks.deepracer_network_name(s.preset),
+        network_preset=s.preset,
+        lidar=None,
+        training_summary={
+            "track": s.track,
+            "race_type": s.race_type,
+            "iterations": int(ckpt["iteration"]) + 1,
+            "minutes": round(float(ckpt["elapsed_s"]) / 60.0, 2),
+            **(summary or {}),
+        },
+        reward_source=reward.read_text() if reward.suffix == ".py" and reward.is_file() else None,
+        metrics_csv=metrics if metrics.is_file() else None,
+        stack_size=stack_size,
+    )
+
+
+def run_hyperparameters(run_dir: str | Path) -> Hyperparameters:
+    """A run's hyperparameters (``RUN/ip/hyperparameters.json``; defaults if it has none)."""
+    path = Path(run_dir) / "ip" / "hyperparameters.json"
+    return Hyperparameters.load(path) if path.exists() else Hyperparameters()

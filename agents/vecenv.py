@@ -41,6 +41,7 @@ class _Slot:
     episode: int = 0
     steps: int = 0
     reward: float = 0.0
+    start: float = 0.0  # simulated time the current episode started
 
 
 @dataclass
@@ -55,7 +56,13 @@ class StepBatch:
 
 
 class EnvGroup:
-    """Some races and their learner slots; runs inside a worker (or in-process)."""
+    """Some races and their learner slots; runs inside a worker (or in-process).
+
+    ``slot_offset`` is the global index of this group's first slot and ``total_slots`` the
+    slot count of the whole vec env: a simtrace row's episode is
+    ``episode_of_slot * total_slots + global_slot``, unique across groups and increasing
+    per slot.
+    """
 
     def __init__(
         self,
@@ -64,6 +71,8 @@ class EnvGroup:
         seeds: list[int],
         learner_cars: list[str],
         record_simtrace: bool = True,
+        slot_offset: int = 0,
+        total_slots: int | None = None,
     ) -> None:
         config = RaceConfig.from_json(config_json)
         reward_fn = resolve_reward(reward, config.race_type)
@@ -73,7 +82,8 @@ class EnvGroup:
         ]
         self.learners = set(learner_cars)
         pairs = [(i, car) for i in range(len(self.envs)) for car in learner_cars]
-        self.slots = [_Slot(k, i, car) for k, (i, car) in enumerate(pairs)]
+        self.slots = [_Slot(slot_offset + k, i, car) for k, (i, car) in enumerate(pairs)]
+        self.total_slots = total_slots or len(self.slots)
         self.discrete = isinstance(config.cars[0].action_space, DiscreteActionSpace)
         self.record_simtrace = record_simtrace
         self.rows: list[dict[str, Any]] = []
@@ -88,6 +98,8 @@ class EnvGroup:
             for car in env.possible_agents:
                 self.last_obs[(i, car)] = obs[car]
                 self.last_info[(i, car)] = infos[car]
+        for slot in self.slots:
+            slot.start = self.envs[slot.env].time
         n = len(self.slots)
         return StepBatch(self._stack_obs(), np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
 
@@ -127,7 +139,7 @@ class EnvGroup:
                     rewards[k], terminated[k], truncated[k] = rew[car], term[car], trunc[car]
                     if self.record_simtrace:
                         facts = step_facts(infos[car], poses[car], commands[car], rew[car])
-                        episode = slot.episode * len(self.slots) + slot.index
+                        episode = slot.episode * self.total_slots + slot.index
                         self.rows.append(simtrace_row(facts, episode, wall_clock=time.time()))
                     if term[car] or trunc[car]:
                         episodes.append(self._episode_stats(i, car, slot, infos[car]))
@@ -135,6 +147,8 @@ class EnvGroup:
                     first, info = env.restart_car(car)
                     self.last_obs[(i, car)] = first
                     self.last_info[(i, car)] = info
+                    if k is not None:
+                        self.slots[k].start = env.time
         return StepBatch(self._stack_obs(), rewards, terminated, truncated, episodes)
 
     def _action(
@@ -155,6 +169,8 @@ class EnvGroup:
             "progress": 100.0 if lap_complete else float(info["progress"]),
             "lap_complete": lap_complete,
             "status": info["episode_status"],
+            "start_time": slot.start,
+            "end_time": float(info["time"]),
         }
         if i in self.opponents:
             rivals = [
@@ -244,6 +260,8 @@ class RacingVecEnv(VecEnv):
         seeds = [config.seed + 1000 * i for i in range(self.num_races)]
         shares = min(workers, self.num_races) if workers > 0 else 1
         self._races_of = [list(range(self.num_races))[w::shares] for w in range(shares)]
+        per_car = len(self.learner_cars)
+        offsets = np.cumsum([0] + [len(r) * per_car for r in self._races_of]).tolist()
         kwargs = [
             {
                 "config_json": config.to_json(),
@@ -251,8 +269,10 @@ class RacingVecEnv(VecEnv):
                 "seeds": [seeds[i] for i in races],
                 "learner_cars": self.learner_cars,
                 "record_simtrace": record_simtrace,
+                "slot_offset": offsets[w],
+                "total_slots": self.num_envs,
             }
-            for races in self._races_of
+            for w, races in enumerate(self._races_of)
         ]
         self._local: EnvGroup | None = None
         self._conns: list[Any] = []

@@ -32,7 +32,7 @@ def make_config(
     action_space: Any = None,
     mode: str = "race",
     seed: int = 0,
-    direction: str = "ccw",
+    direction: str | None = None,
     **rules: Any,
 ) -> RaceConfig:
     """Build a :class:`RaceConfig` from the common keyword settings.

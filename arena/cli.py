@@ -36,7 +36,9 @@ def race_command(
     race_type: Annotated[
         str, typer.Option(help="time_trial | object_avoidance | head_to_bot | head_to_model")
     ] = "time_trial",
-    direction: Annotated[str, typer.Option(help="ccw or cw")] = "ccw",
+    direction: Annotated[
+        str | None, typer.Option(help="ccw or cw (default: the way the track's file runs).")
+    ] = None,
     cars: Annotated[
         int | None, typer.Option(help="Controlled cars (default 1; 2 for head_to_model).")
     ] = None,

@@ -19,8 +19,8 @@ from arena.actions import (
     DiscreteActionSpace,
     default_discrete_space,
 )
-from arena.sensors_spec import LidarConfig, check_sensors
-from tracks.catalog import get_track
+from arena.sensors_spec import MAX_STACK_SIZE, LidarConfig, check_sensors
+from tracks.catalog import Direction, get_track
 from tracks.track import Track, TrackError
 
 RaceType = Literal["time_trial", "object_avoidance", "head_to_bot", "head_to_model"]
@@ -46,6 +46,8 @@ class CarConfig(_Frozen):
     sensors: tuple[str, ...] = ("lidar",)
     action_space: ActionSpace = Field(default_factory=default_discrete_space)
     lidar_config: LidarConfig = LidarConfig()
+    stack_size: int = Field(default=1, ge=1, le=MAX_STACK_SIZE)
+    """Frames of each sensor in an observation, stacked along its last axis (DeepRacer's)."""
 
     @field_validator("sensors")
     @classmethod
@@ -148,7 +150,8 @@ class RaceConfig(_Frozen):
     """Everything that decides a race: track, rules, cars and seed."""
 
     track: str = "beginner_loop"
-    direction: Literal["ccw", "cw"] = "ccw"
+    direction: Direction | None = None
+    """``ccw`` or ``cw``; ``None`` drives the track the way its file runs (waypoint order)."""
     race_type: RaceType = "time_trial"
     mode: Mode = "race"
     cars: tuple[CarConfig, ...] = (CarConfig(name="car0"),)
@@ -229,17 +232,25 @@ class RaceConfig(_Frozen):
 def resolve_track(config: RaceConfig) -> tuple[Track, bool]:
     """The config's track in its race direction, and whether that reverses the file.
 
+    A track file is driven in its waypoint order unless ``config.direction`` asks for the
+    other way round (DeepRacer's ``_cw`` files run clockwise, ``is_reversed`` false).
     An unknown or unreadable track is a :class:`ConfigError`.
     """
     try:
         native = get_track(config.track)
     except TrackError as exc:
         raise ConfigError(f"invalid race config: track: {exc}") from None
-    return native.with_direction(config.direction), native.direction != config.direction
+    track = native if config.direction is None else native.with_direction(config.direction)
+    return track, track is not native
 
 
 def describe_validation_error(exc: ValidationError) -> str:
-    """One readable line per problem: ``field.path: message``."""
+    """``invalid race config:`` and the problems, as :func:`validation_problems` gives them."""
+    return "invalid race config: " + validation_problems(exc)
+
+
+def validation_problems(exc: ValidationError) -> str:
+    """One readable ``field.path: message`` per problem, joined with ``; ``."""
     lines = []
     errors = exc.errors()
     failing = [e["loc"] for e in errors if e["type"] != "too_short"]
@@ -251,7 +262,7 @@ def describe_validation_error(exc: ValidationError) -> str:
         where = ".".join(str(p) for p in err["loc"] if not str(p).startswith(("discrete", "cont")))
         msg = err["msg"].removeprefix("Value error, ")
         lines.append(f"{where or 'config'}: {msg}")
-    return "invalid race config: " + "; ".join(dict.fromkeys(lines))
+    return "; ".join(dict.fromkeys(lines))
 
 
 __all__ = [

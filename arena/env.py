@@ -189,8 +189,11 @@ class RacingEnv(ParallelEnv):
         }
         self._rewards = self._reward_table(reward_functions)
         self._obs_spaces = {
-            c.name: observation_space(c.sensors, c.lidar_config) for c in config.cars
+            c.name: observation_space(c.sensors, c.lidar_config, c.stack_size) for c in config.cars
         }
+        # Cars that stack frames, and their last stacked observation (oldest frame first).
+        self._stack_sizes = {c.name: c.stack_size for c in config.cars if c.stack_size > 1}
+        self._stacks: dict[str, dict[str, np.ndarray]] = {}
         self._act_spaces = {c.name: c.action_space.gym_space() for c in config.cars}
         self._physics = world.PhysicsSettings(
             control_hz=config.physics.control_hz, physics_hz=config.physics.physics_hz
@@ -260,7 +263,7 @@ class RacingEnv(ParallelEnv):
         self.time = 0.0  # before the world: bots draw their first lane change from it
         self._build_world()
         self.agents = list(self.possible_agents)
-        observations = self._observe()
+        observations = self._observe(fresh=True)
         infos = {a: self._info(a, self._initial_params(a)) for a in self.agents}
         return observations, infos
 
@@ -572,7 +575,7 @@ class RacingEnv(ParallelEnv):
         live.released_at = None
         self._forget_poses()
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
-        observation = self._observe([agent])[agent]
+        observation = self._observe([agent], fresh=True)[agent]
         return observation, self._info(agent, self._initial_params(agent))
 
     # ------------------------------------------------------------ observations
@@ -641,12 +644,41 @@ class RacingEnv(ParallelEnv):
             box for box, owner in zip(scene.boxes, scene.owners, strict=True) if owner != exclude
         ]
 
-    def _observe(self, agents: list[str] | None = None) -> dict[str, dict[str, np.ndarray]]:
-        """Every sensor of ``agents`` (default: the live cars); lidars scan in one batch."""
+    def _observe(
+        self, agents: list[str] | None = None, fresh: bool = False
+    ) -> dict[str, dict[str, np.ndarray]]:
+        """Every sensor of ``agents`` (default: the live cars); lidars scan in one batch.
+
+        Cars that stack frames get their last ``stack_size`` frames; ``fresh`` (an episode
+        start) fills their stacks with copies of this first frame.
+        """
         agents = self.agents if agents is None else agents
         with_lidar = [a for a in agents if a in self._lidar_reach]
         ranges = self._scan_lidars(with_lidar) if with_lidar else {}
-        return {agent: self._observe_one(agent, ranges.get(agent)) for agent in agents}
+        observations = {agent: self._observe_one(agent, ranges.get(agent)) for agent in agents}
+        if self._stack_sizes:
+            for agent in self._stack_sizes.keys() & observations.keys():
+                observations[agent] = self._stack(agent, observations[agent], fresh)
+        return observations
+
+    def _stack(
+        self, agent: str, frame: dict[str, np.ndarray], fresh: bool
+    ) -> dict[str, np.ndarray]:
+        """A stacking car's observation: its stack without the oldest frame, plus ``frame``.
+
+        New arrays every step (earlier observations handed out stay as they were).
+        """
+        k = self._stack_sizes[agent]
+        last = None if fresh else self._stacks.get(agent)
+        if last is None:
+            stacked = {n: np.concatenate([f] * k, axis=-1) for n, f in frame.items()}
+        else:
+            stacked = {
+                n: np.concatenate([last[n][..., f.shape[-1] :], f], axis=-1)
+                for n, f in frame.items()
+            }
+        self._stacks[agent] = stacked
+        return stacked
 
     def _scan_lidars(self, agents: list[str]) -> dict[str, np.ndarray]:
         """Lidar ranges of ``agents``, casting only beams aimed at objects they could see.

@@ -106,9 +106,12 @@ def check_sensors(sensors: tuple[str, ...] | list[str]) -> tuple[str, ...]:
     return tuple(s for s in SENSOR_NAMES if s in names)
 
 
-def sensor_space(name: str, lidar: LidarConfig | None = None) -> spaces.Space:
-    """The observation space of one sensor."""
-    lidar = lidar or LidarConfig()
+MAX_STACK_SIZE = 8
+"""The most frames a car's observation may stack (DeepRacer's ``stack_size``)."""
+
+
+def _frame_space(name: str, lidar: LidarConfig) -> spaces.Box:
+    """The observation space of one frame of one sensor."""
     if name == "camera":
         return spaces.Box(0, 255, (CAMERA_HEIGHT, CAMERA_WIDTH, 1), dtype=np.uint8)
     if name == "stereo":
@@ -123,6 +126,27 @@ def sensor_space(name: str, lidar: LidarConfig | None = None) -> spaces.Space:
     raise ValueError(f"unknown sensor {name!r}; choose from {list(SENSOR_NAMES)}")
 
 
-def observation_space(sensors: tuple[str, ...], lidar: LidarConfig | None = None) -> spaces.Dict:
-    """A car's observation space: a Dict with one entry per sensor."""
-    return spaces.Dict({name: sensor_space(name, lidar) for name in check_sensors(sensors)})
+def sensor_space(name: str, lidar: LidarConfig | None = None, stack_size: int = 1) -> spaces.Box:
+    """The observation space of one sensor: ``stack_size`` frames along the last axis.
+
+    A stack holds the frames oldest first, so the camera's ``120 x 160 x 1`` becomes
+    ``120 x 160 x k``, stereo ``120 x 160 x 2k`` (each frame's two channels together) and a
+    lidar's ``n`` values ``n * k``.
+    """
+    if not 1 <= stack_size <= MAX_STACK_SIZE:
+        raise ValueError(f"stack_size must be 1 to {MAX_STACK_SIZE}, got {stack_size}")
+    frame = _frame_space(name, lidar or LidarConfig())
+    if stack_size == 1:
+        return frame
+    low = np.concatenate([frame.low] * stack_size, axis=-1)
+    high = np.concatenate([frame.high] * stack_size, axis=-1)
+    return spaces.Box(low, high, dtype=frame.dtype)
+
+
+def observation_space(
+    sensors: tuple[str, ...], lidar: LidarConfig | None = None, stack_size: int = 1
+) -> spaces.Dict:
+    """A car's observation space: a Dict with one entry per sensor (see :func:`sensor_space`)."""
+    return spaces.Dict(
+        {name: sensor_space(name, lidar, stack_size) for name in check_sensors(sensors)}
+    )

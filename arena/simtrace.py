@@ -4,7 +4,8 @@
 car (its info and params) together with its pose, action and reward. The race trace of
 :class:`arena.race.RaceResult` keeps some of these facts as columns; :func:`simtrace_row`
 turns them into a simtrace row for training rollouts (:mod:`agents.vecenv`) and evaluation
-races (:func:`race_rows`) alike, so both files agree column by column on the same steps.
+races (:func:`race_rows`, :func:`lap_rows`) alike, so both files agree column by column on the
+same steps.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -130,6 +131,8 @@ def simtrace_row(facts: StepFacts, episode: int, wall_clock: float) -> dict[str,
       in training, where incidents end the episode instead).
     - ``obstacle_crash_counter``: crashes so far in the episode (cumulative, from 0 at its
       start), not a per-step flag.
+    - ``progress``: 100 on a ``lap_complete`` step (the arena's progress has already
+      wrapped into the next lap there), so a completed lap reads as complete.
 
     ``yaw`` is in degrees; ``action`` is the index for discrete spaces and
     ``"[steer, speed]"`` (4 decimals) for continuous ones; ``tstamp`` is simulated time.
@@ -149,7 +152,7 @@ def simtrace_row(facts: StepFacts, episode: int, wall_clock: float) -> dict[str,
         "reward": facts.reward,
         "done": facts.done,
         "all_wheels_on_track": facts.all_wheels_on_track,
-        "progress": facts.progress,
+        "progress": 100.0 if facts.status == "lap_complete" else facts.progress,
         "closest_waypoint": facts.closest_waypoint,
         "track_len": facts.track_len,
         "tstamp": facts.t,
@@ -171,6 +174,33 @@ def race_rows(
     if car not in result.facts:
         raise ValueError(f"no step facts for car {car!r}: simtrace needs a race run here")
     return [simtrace_row(facts, episode, wall_clock) for facts in result.facts[car]]
+
+
+def lap_rows(result: RaceResult, car: str, wall_clock: float = 0.0) -> list[dict[str, Any]]:
+    """Simtrace rows of one car's race with one episode per lap, as DeepRacer's evaluation.
+
+    Lap ``k`` (from 0) is episode ``k``: its steps restart at 1, its crash counter at 0, and
+    its last row (``lap_complete``) has ``done`` true and progress 100. An unfinished last
+    lap is an episode of its own, ending with the race's last row. ``ValueError`` as
+    :func:`race_rows` for a result without step facts.
+    """
+    if car not in result.facts:
+        raise ValueError(f"no step facts for car {car!r}: simtrace needs a race run here")
+    rows: list[dict[str, Any]] = []
+    lap, steps, crashes_before = 0, 0, 0
+    for facts in result.facts[car]:
+        steps += 1
+        lap_done = facts.status == "lap_complete"
+        lap_facts = replace(
+            facts,
+            steps=steps,
+            done=facts.done or lap_done,
+            crash_count=facts.crash_count - crashes_before,
+        )
+        rows.append(simtrace_row(lap_facts, lap, wall_clock))
+        if lap_done:
+            lap, steps, crashes_before = lap + 1, 0, facts.crash_count
+    return rows
 
 
 def write_simtrace(path: str | Path, rows: Iterable[dict[str, Any]]) -> Path:

@@ -91,7 +91,7 @@ def create_event(session: Session, spec: EventCreate, created_by: int | None) ->
         name=spec.name,
         race_type=spec.race_type,
         track=spec.track,
-        direction=spec.direction,
+        direction=config.direction,
         ranking_metric=spec.ranking_metric,
         ruleset=config.ruleset(),
         ruleset_hash=config.ruleset_hash(),

@@ -13,7 +13,7 @@ from typing import Any
 
 from sqlalchemy.orm import Session
 
-from arena.config import CarConfig, RaceConfig
+from arena.config import CarConfig, RaceConfig, resolve_track
 from arena.policy import Policy
 from league.models import Entry, Event, Job, Model
 from league.storage import DigestMismatch, Storage
@@ -45,9 +45,10 @@ def car_name(slot: dict[str, Any], index: int) -> str:
 
 
 def model_car(name: str, info: dict[str, Any]) -> CarConfig:
-    """A car with the sensors, action space and lidar config a model declares."""
+    """A car with the sensors, action space, lidar config and stack size a model declares."""
     fields: dict[str, Any] = {"name": name, "sensors": tuple(info["sensors"])}
     fields["action_space"] = info["action_space"]
+    fields["stack_size"] = info.get("stack_size", 1)  # absent from models stored before it
     if info.get("lidar_config"):
         fields["lidar_config"] = info["lidar_config"]
     return CarConfig.model_validate(fields)
@@ -97,7 +98,6 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
     """Drivers for a plan (call in the sandbox: this runs submitted graphs)."""
     from agents.pursuit import PurePursuitPolicy
     from submissions import load_policy
-    from tracks.catalog import get_track
 
     drivers: dict[str, Policy] = {}
     track = None
@@ -109,6 +109,6 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
             drivers[car.name] = load_policy(car.model, non_finite="raise", name=f"car {car.name}")
         else:
             if track is None:
-                track = get_track(plan.config.track).with_direction(plan.config.direction)
+                track = resolve_track(plan.config)[0]
             drivers[car.name] = PurePursuitPolicy(track, spec.action_space)
     return drivers

@@ -116,7 +116,9 @@ class EventCreate(BaseModel):
     name: EventName
     race_type: RaceType = "time_trial"
     track: Annotated[str, Field(min_length=1, max_length=64)] = "beginner_loop"
-    direction: Literal["ccw", "cw"] = "ccw"
+    direction: Literal["ccw", "cw"] | None = Field(
+        default=None, description="ccw or cw; default: the way the track's file runs"
+    )
     laps: int = Field(default=3, ge=1, le=100)
     ranking_metric: Metric = "total"
     penalties: Penalties = Penalties()

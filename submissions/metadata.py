@@ -17,7 +17,14 @@ from arena.actions import (
     from_deepracer_metadata,
     to_deepracer_metadata,
 )
-from arena.sensors_spec import DEEPRACER_SENSOR, FROM_DEEPRACER_SENSOR, LidarConfig, check_sensors
+from arena.sensors_spec import (
+    DEEPRACER_SENSOR,
+    FROM_DEEPRACER_SENSOR,
+    MAX_STACK_SIZE,
+    LidarConfig,
+    check_sensors,
+    sensor_space,
+)
 from submissions.format import (
     CONTINUOUS_OUTPUT,
     DISCRETE_OUTPUT,
@@ -55,6 +62,8 @@ class SlipstreamSection(_Strict):
     observation: tuple[InputSpec, ...] = Field(min_length=1, max_length=5)
     output: OutputSpec
     network_preset: str | None = Field(default=None, max_length=64)
+    stack_size: int = Field(default=1, ge=1, le=MAX_STACK_SIZE)
+    """Frames of each sensor the graph reads, stacked along the last axis (absent: 1)."""
     training: dict[str, JsonScalar] = Field(default_factory=dict, max_length=32)
     created_at: datetime
     policy_sha256: str = Field(pattern=r"^[0-9a-f]{64}$")
@@ -71,6 +80,20 @@ class ModelMetadata(_Strict):
     version: str | int
     lidar_config: LidarConfig | None = None
     slipstream: SlipstreamSection
+
+
+def stacked_observation_spec(
+    sensors: tuple[str, ...], lidar: LidarConfig | None, stack_size: int = 1
+) -> tuple[InputSpec, ...]:
+    """The graph inputs for ``sensors`` with ``stack_size`` frames each (batch excluded)."""
+    specs = observation_spec(sensors, lidar)
+    if stack_size == 1:
+        return tuple(specs)
+
+    def shape(name: str) -> tuple[int, ...]:
+        return tuple(int(d) for d in sensor_space(name, lidar, stack_size).shape)
+
+    return tuple(s.model_copy(update={"shape": shape(s.name)}) for s in specs)
 
 
 @dataclass(frozen=True)
@@ -188,18 +211,8 @@ def _sensors(meta: ModelMetadata) -> tuple[tuple[str, ...] | None, list[Problem]
 def _consistency(
     meta: ModelMetadata, space: ActionSpace, sensors: tuple[str, ...], policy: bytes
 ) -> list[Problem]:
-    problems = []
     section = meta.slipstream
-    expected_obs = tuple(observation_spec(sensors, meta.lidar_config))
-    if section.observation != expected_obs:
-        problems.append(
-            _problem(
-                "slipstream.observation",
-                short([s.model_dump() for s in expected_obs], 200),
-                short([s.model_dump() for s in section.observation], 200),
-                "The observation spec does not match the declared sensors.",
-            )
-        )
+    problems = _observation_problems(section, sensors, meta.lidar_config)
     if isinstance(space, DiscreteActionSpace):
         expected_out = OutputSpec(convention=DISCRETE_OUTPUT, size=space.n)
     else:
@@ -233,6 +246,40 @@ def _consistency(
             )
         )
     return problems
+
+
+def _observation_problems(
+    section: SlipstreamSection, sensors: tuple[str, ...], lidar: LidarConfig | None
+) -> list[Problem]:
+    """The observation spec against the sensors and stack size: one problem per input whose
+    shape alone is wrong, else one for the whole spec."""
+    expected = stacked_observation_spec(sensors, lidar, section.stack_size)
+    if section.observation == expected:
+        return []
+    found = section.observation
+    same_but_shapes = len(found) == len(expected) and all(
+        f.name == e.name and f.dtype == e.dtype for f, e in zip(found, expected, strict=True)
+    )
+    if same_but_shapes:
+        return [
+            _problem(
+                f"slipstream.observation[{i}].shape",
+                short(e.shape),
+                short(f.shape),
+                f"The {e.name} input's shape does not match the sensor with "
+                f"stack_size {section.stack_size}.",
+            )
+            for i, (f, e) in enumerate(zip(found, expected, strict=True))
+            if f.shape != e.shape
+        ]
+    return [
+        _problem(
+            "slipstream.observation",
+            short([s.model_dump() for s in expected], 200),
+            short([s.model_dump() for s in found], 200),
+            "The observation spec does not match the declared sensors.",
+        )
+    ]
 
 
 def check_metadata(
@@ -292,6 +339,7 @@ def build_metadata(
     network_preset: str | None,
     training_summary: dict[str, JsonScalar] | None,
     created_at: datetime,
+    stack_size: int = 1,
 ) -> ModelMetadata:
     """The metadata for a policy (raises pydantic's ValidationError on bad values)."""
     discrete = isinstance(action_space, DiscreteActionSpace)
@@ -306,9 +354,10 @@ def build_metadata(
         lidar_config=lidar_config,
         slipstream=SlipstreamSection(
             format_version=FORMAT_VERSION,
-            observation=tuple(observation_spec(sensors, lidar_config)),
+            observation=stacked_observation_spec(sensors, lidar_config, stack_size),
             output=OutputSpec(convention=convention, size=size),
             network_preset=network_preset,
+            stack_size=stack_size,
             training=dict(training_summary or {}),
             created_at=created_at,
             policy_sha256=hashlib.sha256(policy).hexdigest(),
@@ -317,6 +366,11 @@ def build_metadata(
 
 
 def dump_metadata(meta: ModelMetadata) -> bytes:
-    """Serialise metadata deterministically (sorted keys, two-space indent, UTF-8)."""
+    """Serialise metadata deterministically (sorted keys, two-space indent, UTF-8).
+
+    ``stack_size`` is written only when above 1, so unstacked files are as they were.
+    """
     data = meta.model_dump(mode="json")
+    if data["slipstream"]["stack_size"] == 1:
+        del data["slipstream"]["stack_size"]
     return (json.dumps(data, indent=2, sort_keys=True, allow_nan=False) + "\n").encode()

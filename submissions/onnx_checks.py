@@ -182,7 +182,21 @@ def _batch_ok(dims: list[int | str]) -> bool:
     return bool(dims) and (isinstance(dims[0], str) or dims[0] == 1)
 
 
-def _io_problems(model: onnx.ModelProto, spec: tuple[InputSpec, ...], size: int) -> list[Problem]:
+def _shape_message(spec: InputSpec, dims: list[int | str], stack_size: int) -> str:
+    """Why an input's shape is refused; names the stack size the graph's shape implies."""
+    message = f"The input shape does not match the sensor with stack_size {stack_size}."
+    frame = spec.shape[-1] // stack_size
+    found = dims[1:]
+    same_lead = len(found) == len(spec.shape) and tuple(found[:-1]) == spec.shape[:-1]
+    last = found[-1] if found else None
+    if same_lead and isinstance(last, int) and last > 0 and last % frame == 0:
+        message += f" The graph reads {last // frame} frame(s): declare that stack_size."
+    return message
+
+
+def _io_problems(
+    model: onnx.ModelProto, spec: tuple[InputSpec, ...], size: int, stack_size: int = 1
+) -> list[Problem]:
     graph = model.graph
     names = [v.name for v in graph.input]
     wanted = [s.name for s in spec]
@@ -217,7 +231,7 @@ def _io_problems(model: onnx.ModelProto, spec: tuple[InputSpec, ...], size: int)
                     f"input:{s.name}",
                     want,
                     short(dims),
-                    "The input shape does not match the sensor.",
+                    _shape_message(s, dims, stack_size),
                 )
             )
     if len(graph.output) != 1:
@@ -311,9 +325,8 @@ def check_graph(policy: bytes, checked: CheckedMetadata, limits: Limits) -> list
     if problems:
         return problems
     section = checked.metadata.slipstream
-    return _io_problems(model, section.observation, section.output.size) or _cost_problems(
-        model, limits
-    )
+    io = _io_problems(model, section.observation, section.output.size, section.stack_size)
+    return io or _cost_problems(model, limits)
 
 
 def open_session(policy: bytes, intra_op_threads: int = 1) -> ort.InferenceSession:

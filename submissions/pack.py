@@ -53,13 +53,16 @@ def pack(
     metrics_csv: bytes | str | Path | None = None,
     network_preset: str | None = None,
     created_at: datetime | None = None,
+    stack_size: int = 1,
 ) -> Path:
     """Write a format-1 submission archive and return its path.
 
     ``action_space`` is a space, its dict form, or DeepRacer's metadata keys; ``sensors``
     use Slipstream or DeepRacer names. A ``reward_function`` or ``metrics_csv`` given as
     ``str`` is the content (a ``Path`` is read). The same parts and ``created_at``
-    (default: now, whole seconds, UTC) give the same bytes. Metadata values are checked
+    (default: now, whole seconds, UTC) give the same bytes. ``stack_size`` is the number of
+    frames of each sensor the graph reads (its inputs' last axis holds them all: a camera
+    ``120 x 160 x stack_size``). Metadata values are checked
     (pydantic or ``ValueError``); the graph is not: run :func:`submissions.validate`.
     """
     policy = _bytes(policy_onnx, text=False)
@@ -75,6 +78,7 @@ def pack(
         network_preset=network_preset,
         training_summary=training_summary,
         created_at=created_at or datetime.now(UTC).replace(microsecond=0),
+        stack_size=stack_size,
     )
     members = [(METADATA_MEMBER, dump_metadata(meta)), (POLICY_MEMBER, policy)]
     if reward_function is not None:

@@ -40,7 +40,12 @@ def preflight(
     """
     policy = load_policy(source)
     info = policy.info
-    car = {"name": "model", "sensors": info.sensors, "action_space": info.action_space}
+    car = {
+        "name": "model",
+        "sensors": info.sensors,
+        "action_space": info.action_space,
+        "stack_size": info.stack_size,
+    }
     if info.lidar_config is not None:
         car["lidar_config"] = info.lidar_config
     config = RaceConfig.build(

@@ -46,6 +46,7 @@ class ModelInfo(BaseModel):
     output: OutputSpec
     neural_network: str
     network_preset: str | None
+    stack_size: int = 1
     training_algorithm: str
     training_summary: dict[str, JsonScalar]
     created_at: datetime
@@ -121,6 +122,7 @@ def _info(data: bytes, members: dict[str, bytes], checked: CheckedMetadata) -> M
         output=section.output,
         neural_network=meta.neural_network,
         network_preset=section.network_preset,
+        stack_size=section.stack_size,
         training_algorithm=meta.training_algorithm,
         training_summary=section.training,
         created_at=section.created_at,

@@ -259,6 +259,9 @@ def test_unsupported_format_version() -> None:
 
 def test_observation_mismatch() -> None:
     p = refused(with_metadata(lambda d: d["slipstream"]["observation"][0].update(shape=[32])))
+    assert p.field == "model_metadata.json:slipstream.observation[0].shape"
+    assert (p.expected, p.found) == ("(64,)", "(32,)")
+    p = refused(with_metadata(lambda d: d["slipstream"]["observation"][0].update(name="camera")))
     assert p.field == "model_metadata.json:slipstream.observation"
 
 
