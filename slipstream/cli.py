@@ -1,7 +1,8 @@
 """The ``slipstream`` command: a subcommand group per package, mounted in one Typer app.
 
 ``tracks`` (tracks), ``race`` (arena), ``train`` and ``evaluate`` (agents), ``model``
-(submissions), ``league`` (league), and ``demo``, which runs the whole league locally.
+(submissions, with ``pack`` from agents), ``league`` (league), and ``demo``, which runs the
+whole league locally.
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 import typer
 
 from agents.cli import evaluate_command, train
+from agents.pack_command import pack_command
 from arena.cli import race_command
 from league.cli import app as league_app
 from submissions.cli import app as model_app
@@ -21,7 +23,8 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 app.add_typer(tracks_app, name="tracks", help="Tracks: list, show, import, racing line.")
-app.add_typer(model_app, name="model", help="Model files: validate, inspect, pre-flight.")
+model_app.command("pack")(pack_command)  # agents' command: it reads runs and DeepRacer files
+app.add_typer(model_app, name="model", help="Model files: pack, validate, inspect, pre-flight.")
 app.add_typer(league_app, name="league", help="The league: server, racers, events, standings.")
 app.command("race", help="Race built-in drivers on a track.")(race_command)
 app.command("train", help="Train a policy with PPO (rsl-rl), DeepRacer-style.")(train)

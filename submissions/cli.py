@@ -17,14 +17,14 @@ from submissions.validator import ModelInfo, ValidationReport, validate
 if TYPE_CHECKING:
     from submissions.preflight import PreflightResult
 
-app = typer.Typer(help="Check and inspect submission files.", no_args_is_help=True)
+app = typer.Typer(help="Pack, check and inspect submission files.", no_args_is_help=True)
 console = Console()
 
 FileArg = Annotated[Path, typer.Argument(help="The submission archive (.zip).")]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")]
 
 
-def _print_problems(report: ValidationReport) -> None:
+def print_problems(report: ValidationReport) -> None:
     """One block per problem; untrusted text is printed as plain Text, never as markup."""
     console.print(f"{len(report.problems)} problem(s):")
     for p in report.problems:
@@ -40,7 +40,7 @@ def _describe_space(info: ModelInfo) -> str:
     return f"continuous, steering {s.low:g}..{s.high:g} deg, speed {v.low:g}..{v.high:g} m/s"
 
 
-def _print_info(info: ModelInfo) -> None:
+def print_info(info: ModelInfo) -> None:
     table = Table(show_header=False)
     table.add_column("key", no_wrap=True)
     table.add_column("value", overflow="fold")
@@ -113,12 +113,12 @@ def validate_command(
     elif report.ok:
         console.print(Text.assemble(("valid ", "green"), str(file)))
         if report.info is not None:
-            _print_info(report.info)
+            print_info(report.info)
         if flight is not None:
             _print_preflight(flight)
     else:
         console.print(Text.assemble(("refused ", "red"), str(file)))
-        _print_problems(report)
+        print_problems(report)
     if not report.ok:
         raise typer.Exit(1)
 
@@ -131,8 +131,8 @@ def info_command(file: FileArg, as_json: JsonOpt = False) -> None:
         typer.echo(json.dumps({"ok": report.ok, **report.model_dump(mode="json")}, indent=2))
     else:
         if report.info is not None:
-            _print_info(report.info)
+            print_info(report.info)
         if report.problems:
-            _print_problems(report)
+            print_problems(report)
     if report.info is None:
         raise typer.Exit(1)
