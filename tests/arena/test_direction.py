@@ -17,7 +17,7 @@ from arena.config import RaceConfig, resolve_track
 from league.rulesets import event_config
 from league.schemas import EventCreate
 from slipstream.cli import app
-from tracks.catalog import get_track, user_track_dir
+from tracks.catalog import get_track, import_track, user_track_dir
 from tracks.io import write_document
 
 
@@ -82,3 +82,17 @@ def test_race_refuses_a_bad_direction() -> None:
     result = CliRunner().invoke(app, ["race", "--direction", "sideways"])
     assert result.exit_code != 0
     assert "direction" in result.output
+
+
+@pytest.mark.realdata
+def test_the_real_reinvent2019_wide_cw_runs_clockwise_unreversed(
+    shared_tracks: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The measured bug: this file was driven counter-clockwise with is_reversed True."""
+    monkeypatch.setenv("SLIPSTREAM_HOME", str(tmp_path / "home"))
+    track = import_track(shared_tracks / "reInvent2019_wide_cw.npy")
+    file_rows = np.load(shared_tracks / "reInvent2019_wide_cw.npy")
+    params = _first_params(track=track.name)
+    assert resolve_track(RaceConfig(track=track.name))[0].direction == "cw"
+    assert params["is_reversed"] is False
+    assert np.allclose(params["waypoints"][1], file_rows[1, :2], atol=1e-3)
