@@ -19,6 +19,15 @@ class Settings(BaseSettings):
     database_url: str | None = Field(
         default=None, description="SQLAlchemy URL; default: SQLite in the data directory."
     )
+    storage_url: str | None = Field(
+        default=None,
+        pattern=r"^$|^s3://[a-z0-9][a-z0-9.-]{1,61}[a-z0-9](/.*)?$",
+        description="Model files and traces in object storage (s3://bucket/prefix); "
+        "default: the data directory's files folder.",
+    )
+    s3_endpoint_url: str | None = Field(
+        default=None, description="S3 API endpoint (MinIO, Ceph...); default: AWS S3."
+    )
     max_upload_bytes: int = Field(default=50 * MiB, gt=0, description="Model upload cap.")
     upload_timeout_seconds: float = Field(
         default=300.0, gt=0.0, description="Time a model upload's body may take to arrive."

@@ -3,29 +3,29 @@
 A process killed mid-upload or mid-race can leave a ``.tmp-*`` file, or a stored file whose
 row never committed. At start the server removes both, but only those last modified more
 than a grace period ago: in a deployment of several processes a younger file may be a write
-in progress elsewhere. A candidate orphan is renamed aside first, then looked up again;
-it goes back if a row now refers to it or it was touched meanwhile
-(:meth:`league.storage.Storage.put` refreshes the mtime of a file it finds), so a file whose
-row is being written right now is never deleted. A database that refers to no file of a
-kind at all (a fresh one, or the wrong one) sweeps none of that kind.
+in progress elsewhere. A candidate orphan is taken out of reach first, then looked up again
+(:meth:`league.storage.FileStore.remove_orphan`); it goes back if a row now refers to it or
+it was stored again meanwhile (``put`` marks a file it finds fresh), so a file whose row is
+being written right now is kept. A database that refers to no file of a kind at all (a
+fresh one, or the wrong one) sweeps none of that kind. The store may be a local directory
+or an object-storage bucket: this module only speaks :class:`league.storage.FileStore`.
 """
 
 from __future__ import annotations
 
 import logging
-import os
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from functools import partial
 from itertools import islice
-from pathlib import Path
 from typing import TypeVar
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from league.models import Model, Race
-from league.storage import TEMP_PREFIX, Storage
+from league.storage import FileStore
 
 log = logging.getLogger("slipstream.sweep")
 REFERENCES = {"models": Model.sha256, "traces": Race.trace_sha256}
@@ -43,11 +43,11 @@ class SweepReport:
 
 
 def sweep(
-    sessions: Callable[[], Session], storage: Storage, grace_s: float, now: float | None = None
+    sessions: Callable[[], Session], storage: FileStore, grace_s: float, now: float | None = None
 ) -> SweepReport:
     """Remove temp files and files of every kind no row refers to, older than ``grace_s``."""
     cutoff = (time.time() if now is None else now) - grace_s
-    temp = sum(_unlink(path) for path in list(storage.temp_files(cutoff)))
+    temp = storage.remove_temp(cutoff)
     unreferenced = {kind: _sweep_kind(sessions, storage, kind, cutoff) for kind in REFERENCES}
     report = SweepReport(temp, unreferenced)
     log.info("start-up sweep removed %d temp file(s) and unreferenced files %s", temp, unreferenced)
@@ -55,7 +55,7 @@ def sweep(
 
 
 def _sweep_kind(
-    sessions: Callable[[], Session], storage: Storage, kind: str, cutoff: float
+    sessions: Callable[[], Session], storage: FileStore, kind: str, cutoff: float
 ) -> int:
     removed = 0
     for index, batch in enumerate(_batched(storage.stored(kind, cutoff), BATCH)):
@@ -65,7 +65,7 @@ def _sweep_kind(
                 kind,
             )
             return 0
-        removed += _remove_unreferenced(sessions, kind, batch, cutoff)
+        removed += _remove_unreferenced(sessions, storage, kind, batch, cutoff)
     return removed
 
 
@@ -78,46 +78,25 @@ def _refers_to_any(sessions: Callable[[], Session], kind: str) -> bool:
 
 
 def _remove_unreferenced(
-    sessions: Callable[[], Session], kind: str, batch: list[tuple[str, Path]], cutoff: float
+    sessions: Callable[[], Session],
+    storage: FileStore,
+    kind: str,
+    batch: list[str],
+    cutoff: float,
 ) -> int:
     column = REFERENCES[kind]
     with sessions() as session:
-        known = set(session.scalars(select(column).where(column.in_([s for s, _ in batch]))))
-    removed = 0
-    for sha256, path in batch:
-        if sha256 in known:
-            continue
-        aside = path.with_name(f"{TEMP_PREFIX}orphan-{path.name}")
-        try:
-            os.rename(path, aside)
-        except FileNotFoundError:  # another server's sweep got there first
-            continue
+        known = set(session.scalars(select(column).where(column.in_(batch))))
+
+    def wanted(sha256: str) -> bool:
         with sessions() as session:
-            wanted = session.scalar(select(column).where(column == sha256).limit(1)) is not None
-        if wanted or aside.stat().st_mtime >= cutoff:
-            _put_back(aside, path)
-        else:
-            removed += _unlink(aside)
+            return session.scalar(select(column).where(column == sha256).limit(1)) is not None
+
+    removed = 0
+    for sha256 in batch:
+        if sha256 not in known:
+            removed += storage.remove_orphan(kind, sha256, cutoff, partial(wanted, sha256))
     return removed
-
-
-def _put_back(aside: Path, path: Path) -> None:
-    """Return a renamed-aside file (an upload may have written the same bytes anew)."""
-    if path.exists():
-        aside.unlink()
-    else:
-        os.replace(aside, path)
-
-
-def _unlink(path: Path) -> int:
-    try:
-        path.unlink()
-    except FileNotFoundError:
-        return 0
-    except OSError as exc:
-        log.warning("could not remove %s: %s", path, exc)
-        return 0
-    return 1
 
 
 def _batched(items: Iterable[T], size: int) -> Iterator[list[T]]:

@@ -46,7 +46,7 @@ from league.queue import (
 from league.ranking import rate_race
 from league.sandbox import SandboxError, SandboxLimits, one_thread_env, run_limited
 from league.settings import Settings
-from league.storage import Storage, StorageError
+from league.storage import FileStore, StorageError, open_storage
 
 log = logging.getLogger("slipstream.worker")
 
@@ -62,7 +62,7 @@ def race_answer(plan: RacePlan) -> dict[str, Any]:
 
 def record_result(
     session: Session,
-    storage: Storage,
+    storage: FileStore,
     lease: Lease,
     result: RaceResult,
     entry_ids: Mapping[str, int],
@@ -96,7 +96,7 @@ class Worker:
         self.name = name or f"{socket.gethostname()}-{os.getpid()}"
         self.engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
         self.sessions = make_session_factory(self.engine)
-        self.storage = Storage(settings.storage_dir)
+        self.storage = open_storage(settings)
         self.limits = SandboxLimits(
             memory_mb=settings.race_memory_mb,
             cpu_seconds=settings.race_cpu_seconds,
