@@ -1,26 +1,36 @@
-"""Load test of the league API: leaderboard and race endpoints at several concurrencies.
+"""Load test of the league's public reads with ``wrk``, a compiled load generator.
 
-Seeds a database (SQLite in a temp folder, or a fresh PostgreSQL schema) with an event of
-``--racers`` racers and their races, starts ``slipstream league`` in a subprocess (one
-uvicorn worker), and drives it from this process with asyncio + httpx. Prints a Markdown
-table of p50 / p99 latency and throughput. On a 2-core machine client and server share
-the cores, so the figures are a floor.
+Needs Debian's wrk (``apt-get install wrk``). Prepares a league like the demo's (its four
+events, the first filled with ``--racers`` racers and their races), starts
+``slipstream league serve`` (``python -m league serve``, rate limit off, access log off)
+pinned to one core and runs wrk pinned to another, then prints one table per route:
+throughput and p50 / p99 latency at 16 and 64 connections, and p50 / p99 at a fixed
+``--rate`` (default 500 req/s).
 
-    .venv/bin/python benchmarks/api_load.py --backend sqlite --seconds 5
-    .venv/bin/python benchmarks/api_load.py --backend postgres \
+Fixed rate: wrk has no rate option (wrk2 is not in Debian), so a small Lua script paces it.
+Its ``delay()`` hands out send slots ``1/rate`` apart from one schedule shared by all
+connections (one wrk thread: one Lua state), so requests leave on time while the server
+keeps up; the table shows the rate achieved. A slot missed because every connection was
+busy is skipped, not made up for, and wrk times a request from its send, so when the server
+falls behind the achieved rate drops below the target: read that column before the p99.
+
+    apt-get install wrk
+    .venv/bin/python benchmarks/api_load.py --db sqlite --seconds 10
+    .venv/bin/python benchmarks/api_load.py --db postgres \\
         --postgres-url postgresql+psycopg://postgres@127.0.0.1:5432/test
 """
 
 from __future__ import annotations
 
 import argparse
-import asyncio
 import os
-import statistics
+import re
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
@@ -29,28 +39,44 @@ from arena.config import RaceConfig
 from arena.race import CarResult, RaceResult
 from league import crud
 from league.db import make_engine, make_session_factory, scratch_schema
+from league.demo import demo_events
 from league.migrations import upgrade
 from league.models import Entry, Model
-from league.schemas import EventCreate
 from league.storage import Storage
 
 ROOT = Path(__file__).resolve().parents[1]
+PACER = """
+local ffi = require("ffi")
+ffi.cdef[[ typedef struct { long tv_sec; long tv_nsec; } bench_ts;
+           int clock_gettime(int, bench_ts *); ]]
+local ts = ffi.new("bench_ts")
+local interval, slot = 1000 / %(rate)f, nil
+function delay()  -- ms until this connection's next request: the next free send slot
+  ffi.C.clock_gettime(1, ts)
+  local now = tonumber(ts.tv_sec) * 1000 + tonumber(ts.tv_nsec) / 1e6
+  slot = slot and math.max(slot + interval, now) or now
+  return slot - now
+end
+"""
 
 
 def seed(url: str, data_dir: Path, racers: int, races_each: int) -> tuple[int, int]:
-    """Fill the database; return the event id and one race id."""
+    """The demo's events; the first one raced by ``racers`` racers; its id and a race id."""
     engine = make_engine(url)
     upgrade(engine)
     storage = Storage(data_dir / "files")
+    steps = 450
     with make_session_factory(engine)() as session:
-        event = crud.create_event(session, EventCreate(name="Load Cup", seeds=[0]), None)
+        admin, _ = crud.create_racer(session, "admin", admin=True)
+        events = [crud.create_event(session, spec, admin.id) for spec in demo_events(60)]
+        event = events[0]
         config = RaceConfig.build(**event.ruleset, cars=[{"name": "car0"}])
         race_id = 0
         for i in range(racers):
             racer, _ = crud.create_racer(session, f"racer{i:04d}")
             model = Model(owner_id=racer.id, name=f"m{i}", sha256=f"{i:064x}", size=1, info={})
             session.add(model)
-            session.commit()
+            session.flush()
             entry = Entry(event_id=event.id, model_id=model.id, racer_id=racer.id)
             session.add(entry)
             session.commit()
@@ -60,127 +86,166 @@ def seed(url: str, data_dir: Path, racers: int, races_each: int) -> tuple[int, i
                     "car0", "finished", 3, laps, min(laps), sum(laps) / 3, sum(laps),
                     i % 3, 0, 0, 0.0, 60.0, 1,
                 )  # fmt: skip
-                trace = {"car0": {"t": [k / 15 for k in range(450)], "x": [0.0] * 450}}
-                result = RaceResult(config, [car], ["car0"], 30.0, 450, trace)
+                columns = {k: [round(0.01 * s * (j + 1), 3) for s in range(steps)]
+                           for j, k in enumerate(("t", "x", "y", "heading", "speed"))}  # fmt: skip
+                result = RaceResult(config, [car], ["car0"], 30.0, steps, {"car0": columns})
                 race_id = crud.record_race(session, storage, event, result, {"car0": entry}).id
         event_id = event.id
     engine.dispose()
     return event_id, race_id
 
 
-def start_server(url: str, data_dir: Path, port: int) -> subprocess.Popen:
-    """Run the league server (no rate limit) and wait until it answers."""
+def cores() -> tuple[int, int]:
+    """The server's core and wrk's (the same one on a one-core machine)."""
+    available = sorted(os.sched_getaffinity(0))
+    return available[0], available[1 % len(available)]
+
+
+def start_server(url: str, data_dir: Path, port: int, core: int) -> subprocess.Popen:
+    """``slipstream league serve`` on ``core`` (rate limit off); wait until it answers."""
     env = {
         **os.environ,
-        "SLIPSTREAM_DATA_DIR": str(data_dir),
         "SLIPSTREAM_DATABASE_URL": url,
         "SLIPSTREAM_RATE_LIMIT_PER_SECOND": "0",
     }
-    code = (
-        "import uvicorn; from league.app import create_app; "
-        f"uvicorn.run(create_app(), host='127.0.0.1', port={port}, "
-        "log_level='warning', access_log=False)"
+    args = ["serve", "--port", str(port), "--data-dir", str(data_dir), "--no-access-log"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "league", *args],
+        env=env,
+        cwd=ROOT,
+        preexec_fn=lambda: os.sched_setaffinity(0, {core}),
     )
-    proc = subprocess.Popen([sys.executable, "-c", code], env=env, cwd=ROOT)
-    deadline = time.monotonic() + 30
+    deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         try:
             if httpx.get(f"http://127.0.0.1:{port}/readyz").status_code == 200:
                 return proc
         except httpx.TransportError:
-            time.sleep(0.1)
+            time.sleep(0.2)
     proc.kill()
-    raise RuntimeError("server did not start")
+    raise RuntimeError("the league server did not start")
 
 
-async def drive(base: str, path: str, clients: int, seconds: float) -> tuple[list[float], int]:
-    """``clients`` concurrent loops on ``path`` for ``seconds``; latencies (s) and errors."""
-    latencies: list[float] = []
-    errors = 0
-    limits = httpx.Limits(max_connections=clients, max_keepalive_connections=clients)
-    async with httpx.AsyncClient(base_url=base, limits=limits, timeout=30) as client:
-        deadline = time.perf_counter() + seconds
+@dataclass
+class Run:
+    """What one wrk run measured."""
 
-        async def loop() -> None:
-            nonlocal errors
-            while time.perf_counter() < deadline:
-                start = time.perf_counter()
-                response = await client.get(path)
-                latencies.append(time.perf_counter() - start)
-                errors += response.status_code != 200
-
-        await asyncio.gather(*(loop() for _ in range(clients)))
-    return latencies, errors
+    rate: float
+    p50_ms: float
+    p99_ms: float
+    errors: int
 
 
-def percentile(values: list[float], q: float) -> float:
-    """The q-quantile (0-1) of ``values``."""
-    return statistics.quantiles(values, n=1000, method="inclusive")[int(q * 1000) - 1]
+UNITS = {"us": 1e-3, "ms": 1.0, "s": 1000.0}
 
 
-def run_backend(name: str, url: str, args: argparse.Namespace, port: int) -> list[str]:
-    """Seed, serve and measure one backend; Markdown table rows."""
+def _ms(text: str) -> float:
+    value, unit = re.fullmatch(r"([\d.]+)(us|ms|s)", text).groups()  # type: ignore[union-attr]
+    return float(value) * UNITS[unit]
+
+
+def wrk(url: str, connections: int, seconds: float, core: int, **options: object) -> Run:
+    """One wrk run on ``core``; ``script`` (a Lua file) and ``headers`` optional."""
+    command = [
+        "taskset",
+        "-c",
+        str(core),
+        "wrk",
+        "-t1",
+        f"-c{connections}",
+        f"-d{max(1, round(seconds))}s",
+    ]
+    command += ["--latency", "--timeout", "10s"]
+    for header in options.get("headers", ()):  # type: ignore[attr-defined]
+        command += ["-H", header]
+    if options.get("script"):
+        command += ["-s", str(options["script"])]
+    out = subprocess.run([*command, url], capture_output=True, text=True, check=True).stdout
+    latency = dict(re.findall(r"^\s+(50|99)%\s+(\S+)$", out, re.MULTILINE))
+    if "50" not in latency or "99" not in latency:
+        raise RuntimeError(f"wrk printed no latency distribution:\n{out}")
+    errors = sum(int(n) for n in re.findall(r"Non-2xx or 3xx responses: (\d+)", out))
+    errors += sum(int(n) for n in re.findall(r"(?:connect|read|write|timeout) (\d+)", out))
+    rate = float(re.search(r"Requests/sec:\s+([\d.]+)", out).group(1))  # type: ignore[union-attr]
+    return Run(rate, _ms(latency["50"]), _ms(latency["99"]), errors)
+
+
+def measure(url: str, args: argparse.Namespace, label: str) -> list[str]:
+    """Prepare, serve and measure one database; the table rows."""
+    server_core, wrk_core = cores()
+    rows = []
     with tempfile.TemporaryDirectory() as folder:
         data_dir = Path(folder)
-        event_id, race_id = seed(url, data_dir, args.racers, args.races)
-        proc = start_server(url, data_dir, port)
-        rows = []
+        event, race = seed(url, data_dir, args.racers, args.races)
+        proc = start_server(url, data_dir, args.port, server_core)
+        base = f"http://127.0.0.1:{args.port}"
+        etag = httpx.get(f"{base}/api/events/{event}/leaderboard").headers.get("etag", "")
+        pacer = data_dir / "pacer.lua"
+        pacer.write_text(PACER % {"rate": args.rate})
+        routes = {
+            "home page /": ("/", []),
+            "event page": (f"/events/{event}", []),
+            "leaderboard": (f"/api/events/{event}/leaderboard", []),
+            "leaderboard 304": (f"/api/events/{event}/leaderboard", [f"If-None-Match: {etag}"]),
+            "races list": (f"/api/races?event={event}&limit=20", []),
+            "race detail": (f"/api/races/{race}", []),
+            "trace (gzip)": (f"/api/races/{race}/trace", ["Accept-Encoding: gzip"]),
+        }
         try:
-            base = f"http://127.0.0.1:{port}"
-            paths = {
-                "leaderboard": f"/api/events/{event_id}/leaderboard",
-                "race": f"/api/races/{race_id}",
-                "races list": f"/api/races?event={event_id}&limit=20",
-            }
-            for label, path in paths.items():
-                asyncio.run(drive(base, path, 4, 0.5))  # warm up
-                for clients in args.clients:
-                    lat, errors = asyncio.run(drive(base, path, clients, args.seconds))
-                    rows.append(
-                        f"| {name} | {label} | {clients} | {len(lat) / args.seconds:.0f} | "
-                        f"{percentile(lat, 0.5) * 1000:.1f} | {percentile(lat, 0.99) * 1000:.1f}"
-                        f" | {errors} |"
-                    )
-                    print(rows[-1], flush=True)
+            for name, (path, headers) in routes.items():
+                wrk(base + path, 4, 1, wrk_core, headers=headers)  # warm up
+                runs = [wrk(base + path, c, args.seconds, wrk_core, headers=headers)
+                        for c in (16, 64)]  # fmt: skip
+                paced = wrk(base + path, 32, args.seconds, wrk_core, headers=headers, script=pacer)
+                cells = [f"{r.rate:.0f} | {r.p50_ms:.1f} | {r.p99_ms:.1f}" for r in runs]
+                errors = sum(r.errors for r in (*runs, paced))
+                rows.append(
+                    f"| {label} | {name} | {' | '.join(cells)} | {paced.rate:.0f} | "
+                    f"{paced.p50_ms:.1f} | {paced.p99_ms:.1f} | {errors} |"
+                )
+                print(rows[-1], flush=True)
         finally:
             proc.terminate()
-            proc.wait(timeout=10)
+            proc.wait(timeout=30)
     return rows
 
 
 def main() -> None:
-    """Parse options, run the chosen backends, print the table."""
+    """Parse options, check for wrk, measure, print the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--backend", choices=["sqlite", "postgres", "both"], default="both")
+    parser.add_argument("--db", choices=["sqlite", "postgres"], default="sqlite")
     parser.add_argument(
         "--postgres-url",
         default=os.environ.get("SLIPSTREAM_TEST_POSTGRES_URL"),
         help="PostgreSQL URL (default: $SLIPSTREAM_TEST_POSTGRES_URL)",
     )
-    parser.add_argument("--clients", type=int, nargs="+", default=[1, 16, 64])
-    parser.add_argument("--seconds", type=float, default=5.0, help="per measurement")
+    parser.add_argument("--seconds", type=int, default=5, help="per wrk run")
+    parser.add_argument("--rate", type=float, default=500.0, help="fixed-rate run, req/s")
     parser.add_argument("--racers", type=int, default=50)
     parser.add_argument("--races", type=int, default=3, help="races per racer")
     parser.add_argument("--port", type=int, default=8765)
     args = parser.parse_args()
+    if shutil.which("wrk") is None or shutil.which("taskset") is None:
+        sys.exit("benchmarks/api_load.py needs wrk and taskset: apt-get install wrk util-linux")
+    server_core, wrk_core = cores()
+    print(f"server on core {server_core}, wrk on core {wrk_core}", flush=True)
     header = [
-        "| backend | endpoint | clients | req/s | p50 ms | p99 ms | errors |",
-        "|---|---|---:|---:|---:|---:|---:|",
+        f"| db | route | c16 req/s | p50 ms | p99 ms | c64 req/s | p50 ms | p99 ms "
+        f"| @{args.rate:.0f}/s got | p50 ms | p99 ms | errors |",
+        "|---|---|" + "---:|" * 10,
     ]
     print("\n".join(header), flush=True)
-    rows = []
-    if args.backend in ("sqlite", "both"):
+    if args.db == "sqlite":
         with tempfile.TemporaryDirectory() as folder:
-            rows += run_backend("sqlite", f"sqlite:///{folder}/league.db", args, args.port)
-    if args.backend in ("postgres", "both"):
+            rows = measure(f"sqlite:///{folder}/league.db", args, "sqlite")
+    else:
         if not args.postgres_url:
-            print("postgres skipped: give --postgres-url or set SLIPSTREAM_TEST_POSTGRES_URL")
-        else:
-            url, drop = scratch_schema(args.postgres_url, "league_bench")
-            try:
-                rows += run_backend("postgres", url, args, args.port + 1)
-            finally:
-                drop()
+            sys.exit("--db postgres: give --postgres-url or set SLIPSTREAM_TEST_POSTGRES_URL")
+        url, drop = scratch_schema(args.postgres_url, "league_bench")
+        try:
+            rows = measure(url, args, "postgres")
+        finally:
+            drop()
     print("\n" + "\n".join(header + rows))
 
 

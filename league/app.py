@@ -13,13 +13,13 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from league.api import events, health, jobs, models, racers, races, tracks
-from league.api.events import LeaderboardCache
 from league.bodylimit import BodyLimitMiddleware, BodyRule
 from league.db import make_engine, make_session_factory
 from league.ratelimit import RateLimitMiddleware
+from league.read_cache import ReadCache
 from league.security import SecurityHeadersMiddleware
 from league.settings import Settings
-from league.storage import Storage, StorageError
+from league.storage import StorageError, open_storage
 from league.sweep import sweep
 from league.validation import UploadValidator
 from league.web import STATIC_DIR
@@ -120,8 +120,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.settings = settings
     app.state.engine = engine
     app.state.session_factory = make_session_factory(engine)
-    app.state.storage = Storage(settings.storage_dir)
-    app.state.leaderboards = LeaderboardCache()
+    app.state.storage = open_storage(settings)
+    app.state.read_cache = ReadCache()  # public reads, per results version
     app.state.upload_validator = UploadValidator(settings)
     for module in (health, racers, models, events, jobs, races, tracks, web_model_data):
         app.include_router(module.router)

@@ -59,8 +59,18 @@ def serve(
     host: Annotated[str, typer.Option(help="Address to listen on.")] = "127.0.0.1",
     port: Annotated[int, typer.Option(help="Port to listen on.")] = 8000,
     data_dir: DataDir = None,
+    workers: Annotated[
+        int, typer.Option(min=1, help="Server processes (uvicorn workers) sharing the port.")
+    ] = 1,
+    access_log: Annotated[bool, typer.Option(help="Log every request.")] = True,
 ) -> None:
-    """Run the database migrations, then serve the API (docs at /docs)."""
+    """Run the database migrations, then serve the API (docs at /docs).
+
+    With ``--workers N`` uvicorn runs N processes; each builds the app from the
+    ``SLIPSTREAM_*`` environment (``--data-dir`` is passed on as ``SLIPSTREAM_DATA_DIR``).
+    """
+    import os
+
     import uvicorn
 
     from league.app import create_app
@@ -69,8 +79,16 @@ def serve(
 
     settings = _settings(data_dir)
     settings.data_dir.mkdir(parents=True, exist_ok=True)
-    upgrade(make_engine(settings.db_url, settings.sqlite_busy_timeout_ms))
-    uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+    engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
+    upgrade(engine)
+    engine.dispose()
+    options = {"host": host, "port": port, "log_level": "info", "access_log": access_log}
+    if workers == 1:
+        uvicorn.run(create_app(settings), **options)
+        return
+    if data_dir is not None:
+        os.environ["SLIPSTREAM_DATA_DIR"] = str(data_dir.resolve())
+    uvicorn.run("league.app:create_app", factory=True, workers=workers, **options)
 
 
 @app.command("create-racer")

@@ -20,7 +20,7 @@ from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, utcnow
 from league.queue import evaluation_jobs
 from league.rulesets import event_config
 from league.schemas import EventCreate
-from league.storage import Storage
+from league.storage import FileStore
 from submissions import ModelInfo
 
 if TYPE_CHECKING:
@@ -108,7 +108,7 @@ def create_event(session: Session, spec: EventCreate, created_by: int | None) ->
 
 
 def add_model(
-    session: Session, storage: Storage, owner: Racer, name: str, data: bytes, info: ModelInfo
+    session: Session, storage: FileStore, owner: Racer, name: str, data: bytes, info: ModelInfo
 ) -> tuple[Model, bool]:
     """Store a validated archive and its row; return the model and whether it is new.
 
@@ -171,7 +171,7 @@ def enter_model(
 
 def record_race(
     session: Session,
-    storage: Storage,
+    storage: FileStore,
     event: Event,
     result: RaceResult,
     entries: Mapping[str, Entry],

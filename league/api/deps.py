@@ -9,7 +9,7 @@ from fastapi import Depends, Request
 from sqlalchemy.orm import Session
 
 from league.settings import Settings
-from league.storage import Storage
+from league.storage import FileStore
 
 
 def get_session(request: Request) -> Iterator[Session]:
@@ -23,11 +23,11 @@ def get_settings(request: Request) -> Settings:
     return request.app.state.settings
 
 
-def get_storage(request: Request) -> Storage:
+def get_storage(request: Request) -> FileStore:
     """The app's file storage."""
     return request.app.state.storage
 
 
 SessionDep = Annotated[Session, Depends(get_session)]
 SettingsDep = Annotated[Settings, Depends(get_settings)]
-StorageDep = Annotated[Storage, Depends(get_storage)]
+StorageDep = Annotated[FileStore, Depends(get_storage)]

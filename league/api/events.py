@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import threading
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
-from fastapi.concurrency import run_in_threadpool
 from sqlalchemy import select
 
 from league import crud
@@ -15,6 +13,7 @@ from league.auth import AdminRacer, CurrentRacer
 from league.head_to_head import HeadToHead, head_to_head
 from league.models import Event, Model, utcnow
 from league.ranking import leaderboard, standing_row
+from league.read_cache import Prepared, answer, event_version, prepared
 from league.schemas import (
     MAX_ID,
     EntryAccepted,
@@ -100,33 +99,11 @@ def read_head_to_head(event_id: EventId, session: SessionDep) -> list[HeadToHead
     return head_to_head(session, get_event(session, event_id).id)
 
 
-class LeaderboardCache:
-    """Serialised leaderboards per event, valid while the event's results_version holds."""
-
-    def __init__(self) -> None:
-        self._items: dict[int, tuple[int, bytes]] = {}
-        self._lock = threading.Lock()
-
-    def get(self, event_id: int, version: int) -> bytes | None:
-        """The cached body if it was built at ``version``."""
-        item = self._items.get(event_id)
-        return item[1] if item is not None and item[0] == version else None
-
-    def put(self, event_id: int, version: int, body: bytes) -> None:
-        """Remember a body built at ``version``."""
-        with self._lock:
-            self._items[event_id] = (version, body)
-
-
-def _results_version(request: Request, event_id: int) -> int | None:
-    with request.app.state.engine.connect() as connection:
-        query = select(Event.results_version).where(Event.id == event_id)
-        return connection.execute(query).scalar()
-
-
-def _build_leaderboard(request: Request, event_id: int) -> tuple[int, bytes]:
+def _build_leaderboard(request: Request, event_id: int) -> Prepared | None:
     with request.app.state.session_factory() as session:
-        event = get_event(session, event_id)
+        event = session.get(Event, event_id)
+        if event is None:
+            return None
         standings = leaderboard(session, event)
         board = Leaderboard(
             event_id=event.id,
@@ -134,7 +111,7 @@ def _build_leaderboard(request: Request, event_id: int) -> tuple[int, bytes]:
             ranking_metric=event.ranking_metric,
             rows=[LeaderboardRow.model_validate(standing_row(s)) for s in standings],
         )
-        return event.results_version, board.model_dump_json().encode()
+        return Prepared.of(board.model_dump_json().encode(), "application/json")
 
 
 @router.get("/{event_id}/leaderboard", response_model=Leaderboard, responses=NOT_FOUND)
@@ -143,15 +120,14 @@ async def read_leaderboard(event_id: EventId, request: Request) -> Response:
     metrics (overtakes, times overtaken, at-fault collisions, laps led, gap to the winner),
     score, submissions; head-to-head events add mu, sigma and the conservative ordinal.
 
-    Served from a per-process cache while the event's results_version is unchanged (one
-    primary-key read, on the event loop); a miss rebuilds it in the thread pool.
+    Built once per results_version of the event (``league.read_cache``), answered with an
+    ETag; ``If-None-Match`` with the current one answers 304.
     """
-    version = _results_version(request, event_id)
+    version = event_version(request, event_id)
     if version is None:
         raise HTTPException(404, f"Event {event_id} not found.")
-    cache: LeaderboardCache = request.app.state.leaderboards
-    body = cache.get(event_id, version)
-    if body is None:
-        version, body = await run_in_threadpool(_build_leaderboard, request, event_id)
-        cache.put(event_id, version, body)
-    return Response(content=body, media_type="application/json")
+    key = ("leaderboard", event_id, version)
+    item = await prepared(request, key, lambda: _build_leaderboard(request, event_id))
+    if item is None:
+        raise HTTPException(404, f"Event {event_id} not found.")
+    return answer(request, item)

@@ -4,17 +4,29 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Query, Response
+from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
+from pydantic import TypeAdapter
 from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 
-from league.api.deps import SessionDep, StorageDep
 from league.models import Entry, Race, Racer
+from league.read_cache import (
+    Prepared,
+    answer,
+    answer_gzipped,
+    event_version,
+    gzip_prepared,
+    league_version,
+    prepared,
+    race_version,
+)
 from league.schemas import MAX_ID, ErrorOut, RaceBrief, RaceCarOut, RaceOut
+from league.storage import FileStore
 
 router = APIRouter(prefix="/api/races", tags=["races"])
 RaceId = Annotated[int, Path(ge=1, le=MAX_ID)]
 NOT_FOUND = {404: {"model": ErrorOut, "description": "No such race"}}
+RACE_LIST = TypeAdapter(list[RaceBrief])
 
 
 def _aliases(session: Session, races: list[Race]) -> dict[int, str]:
@@ -45,20 +57,30 @@ def _brief(race: Race, aliases: dict[int, str]) -> dict:
     }
 
 
-@router.get("", response_model=list[RaceBrief])
-def list_races(
-    session: SessionDep,
-    event: Annotated[int | None, Query(ge=1, le=MAX_ID, description="Only this event")] = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
-) -> list[RaceBrief]:
-    """Races, newest first, with each car's result."""
+def _race_list(request: Request, event: int | None, limit: int, offset: int) -> Prepared:
     query = select(Race).options(selectinload(Race.cars)).order_by(Race.id.desc())
     if event is not None:
         query = query.where(Race.event_id == event)
-    races = list(session.scalars(query.limit(limit).offset(offset)))
-    aliases = _aliases(session, races)
-    return [RaceBrief.model_validate(_brief(r, aliases)) for r in races]
+    with request.app.state.session_factory() as session:
+        races = list(session.scalars(query.limit(limit).offset(offset)))
+        aliases = _aliases(session, races)
+        briefs = [RaceBrief.model_validate(_brief(r, aliases)) for r in races]
+    return Prepared.of(RACE_LIST.dump_json(briefs), "application/json")
+
+
+@router.get("", response_model=list[RaceBrief])
+async def list_races(
+    request: Request,
+    event: Annotated[int | None, Query(ge=1, le=MAX_ID, description="Only this event")] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
+) -> Response:
+    """Races, newest first, with each car's result (ETag; built once per results version)."""
+    version: object = league_version(request) if event is None else event_version(request, event)
+    key = ("races", event, limit, offset, version)
+    item = await prepared(request, key, lambda: _race_list(request, event, limit, offset))
+    assert item is not None
+    return answer(request, item)
 
 
 def _race(session: Session, race_id: int) -> Race:
@@ -68,12 +90,38 @@ def _race(session: Session, race_id: int) -> Race:
     return race
 
 
+def _race_detail(request: Request, race_id: int) -> Prepared:
+    with request.app.state.session_factory() as session:
+        race = _race(session, race_id)
+        brief = _brief(race, _aliases(session, [race]))
+        out = RaceOut.model_validate({**brief, "config": race.config, "summary": race.summary})
+    return Prepared.of(out.model_dump_json().encode(), "application/json")
+
+
+def _found(request: Request, race_id: int) -> tuple[int, int, str | None]:
+    found = race_version(request, race_id)
+    if found is None:
+        raise HTTPException(404, f"Race {race_id} not found.")
+    return found
+
+
 @router.get("/{race_id}", response_model=RaceOut, responses=NOT_FOUND)
-def read_race(race_id: RaceId, session: SessionDep) -> RaceOut:
-    """One race: its config, summary and per-car results with lap splits."""
-    race = _race(session, race_id)
-    brief = _brief(race, _aliases(session, [race]))
-    return RaceOut.model_validate({**brief, "config": race.config, "summary": race.summary})
+async def read_race(race_id: RaceId, request: Request) -> Response:
+    """One race: its config, summary and per-car results with lap splits (ETag)."""
+    event_id, version, _ = _found(request, race_id)
+    key = ("race", race_id, event_id, version)
+    item = await prepared(request, key, lambda: _race_detail(request, race_id))
+    assert item is not None
+    return answer(request, item)
+
+
+def _trace(request: Request, race_id: int, sha256: str) -> Prepared:
+    storage: FileStore = request.app.state.storage
+    try:
+        data = storage.read("traces", sha256)
+    except FileNotFoundError:
+        raise HTTPException(404, f"The trace file of race {race_id} is missing.") from None
+    return gzip_prepared(data, "application/json", f'"{sha256}"')
 
 
 @router.get(
@@ -89,14 +137,13 @@ def read_race(race_id: RaceId, session: SessionDep) -> RaceOut:
         },
     },
 )
-def read_trace(race_id: RaceId, session: SessionDep, storage: StorageDep) -> Response:
+async def read_trace(race_id: RaceId, request: Request) -> Response:
     """The race's replay trace (JSON: ``trace``, ``bots``, ``obstacles``, ``events``; races
-    stored before racing metrics have no ``events``)."""
-    race = _race(session, race_id)
-    if race.trace_sha256 is None:
+    stored before racing metrics have no ``events``). A trace never changes: it is sent
+    with ``Cache-Control: immutable`` and gzip-compressed when the client accepts gzip."""
+    _, _, sha256 = _found(request, race_id)
+    if sha256 is None:
         raise HTTPException(404, f"Race {race_id} has no trace.")
-    try:
-        data = storage.read("traces", race.trace_sha256)
-    except FileNotFoundError:
-        raise HTTPException(404, f"The trace file of race {race_id} is missing.") from None
-    return Response(content=data, media_type="application/json")
+    item = await prepared(request, ("trace", sha256), lambda: _trace(request, race_id, sha256))
+    assert item is not None
+    return answer_gzipped(request, item)

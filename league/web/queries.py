@@ -32,12 +32,23 @@ def seconds_left(event: Event, now: datetime) -> float | None:
     return max((event.closes_at - now).total_seconds(), 0.0)
 
 
+_THUMBNAILS: dict[tuple[str, str], str] = {}
+
+
 def thumbnail(track: str, direction: str) -> str | None:
-    """The track's SVG thumbnail, or None when the track is no longer available."""
-    try:
-        return track_thumbnail_svg(get_track(track, direction), size=96)  # type: ignore[arg-type]
-    except TrackError:
-        return None
+    """The track's SVG thumbnail, or None when the track is no longer available.
+
+    Drawn once per (track, direction) and process; a missing track is asked again next time.
+    """
+    key = (track, direction)
+    svg = _THUMBNAILS.get(key)
+    if svg is None:
+        try:
+            svg = track_thumbnail_svg(get_track(track, direction), size=96)  # type: ignore[arg-type]
+        except TrackError:
+            return None
+        _THUMBNAILS[key] = svg
+    return svg
 
 
 def event_cards(session: Session, limit: int = 100) -> list[EventCard]:

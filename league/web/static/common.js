@@ -63,14 +63,14 @@ const Slip = {
   },
 };
 
-// Countdowns: <span class="countdown" data-seconds="N"> ticks down once a second.
+// Countdowns: <span class="countdown" data-closes-at="ISO time"> ticks down once a second.
+// The page holds the absolute closing time, so a cached copy (304) still counts right.
 function startCountdowns() {
-  const started = Date.now();
   const nodes = Array.from(document.querySelectorAll(".countdown"));
   const tick = () => {
-    const elapsed = (Date.now() - started) / 1000;
     for (const node of nodes) {
-      node.textContent = Slip.duration(Number(node.dataset.seconds) - elapsed);
+      const left = (Date.parse(node.dataset.closesAt) - Date.now()) / 1000;
+      node.textContent = Slip.duration(Math.max(left, 0));
     }
   };
   tick();

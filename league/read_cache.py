@@ -1,0 +1,191 @@
+"""Prepared answers for the public reads: bodies built once per results version.
+
+Every cached body is keyed by its route's inputs and the version of the data it shows (an
+event's ``results_version``, which :func:`league.crud.bump_results_version` bumps in the
+transaction that changes a result). A request reads that version first (one indexed query,
+so several server processes stay correct without telling each other anything) and, when a
+body was built at that version, answers it, or ``304 Not Modified`` when the client's
+``If-None-Match`` already names it. Entries whose version moved on simply age out (LRU).
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass
+
+from fastapi.concurrency import run_in_threadpool
+from sqlalchemy import Engine, func, select
+from starlette.requests import Request
+from starlette.responses import Response
+
+from league.models import Event, Race
+
+NO_CACHE = "no-cache"
+IMMUTABLE = "public, max-age=31536000, immutable"
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A ready answer: its bytes, media type, ETag and, if time changes it, its last second."""
+
+    body: bytes
+    media_type: str
+    etag: str
+    expires: float | None = None  # time.time() after which the body is out of date
+    gzipped: bool = False
+
+    @classmethod
+    def of(cls, body: bytes, media_type: str, expires: float | None = None) -> Prepared:
+        """A body with a weak ETag drawn from its bytes."""
+        digest = hashlib.blake2b(body, digest_size=12).hexdigest()
+        return cls(body, media_type, f'W/"{digest}"', expires)
+
+    @property
+    def size(self) -> int:
+        """Bytes held."""
+        return len(self.body)
+
+
+class ReadCache:
+    """A thread-safe LRU of :class:`Prepared` answers, bounded in entries and bytes."""
+
+    def __init__(self, max_items: int = 2048, max_bytes: int = 64 * 1024 * 1024) -> None:
+        self.max_items, self.max_bytes = max_items, max_bytes
+        self._items: OrderedDict[Hashable, Prepared] = OrderedDict()
+        self._bytes = 0
+        self._lock = threading.Lock()
+
+    def get(self, key: Hashable) -> Prepared | None:
+        """The answer stored under ``key`` if it is still in date."""
+        with self._lock:
+            item = self._items.get(key)
+            if item is None:
+                return None
+            if item.expires is not None and time.time() >= item.expires:
+                self._bytes -= self._items.pop(key).size
+                return None
+            self._items.move_to_end(key)
+            return item
+
+    def put(self, key: Hashable, item: Prepared) -> None:
+        """Store ``item`` (not at all when it alone is over the byte bound)."""
+        if item.size > self.max_bytes:
+            return
+        with self._lock:
+            old = self._items.pop(key, None)
+            self._bytes += item.size - (old.size if old else 0)
+            self._items[key] = item
+            while len(self._items) > self.max_items or self._bytes > self.max_bytes:
+                self._bytes -= self._items.popitem(last=False)[1].size
+
+    def clear(self) -> None:
+        """Forget everything."""
+        with self._lock:
+            self._items.clear()
+            self._bytes = 0
+
+
+async def prepared(
+    request: Request, key: Hashable, build: Callable[[], Prepared | None]
+) -> Prepared | None:
+    """The cached answer for ``key``, else ``build()`` run in the thread pool and stored."""
+    cache: ReadCache = request.app.state.read_cache
+    item = cache.get(key)
+    if item is None:
+        item = await run_in_threadpool(build)
+        if item is not None:
+            cache.put(key, item)
+    return item
+
+
+def not_modified(request: Request, etag: str) -> bool:
+    """True when the request's ``If-None-Match`` names ``etag`` (weak comparison)."""
+    header = request.headers.get("if-none-match")
+    if not header:
+        return False
+    if header.strip() == "*":
+        return True
+    bare = etag.removeprefix("W/")
+    return any(tag.strip().removeprefix("W/") == bare for tag in header.split(","))
+
+
+def answer(request: Request, item: Prepared, cache_control: str = NO_CACHE) -> Response:
+    """``item`` as a response, or 304 when the client has it already."""
+    headers = {"ETag": item.etag, "Cache-Control": cache_control}
+    if item.gzipped:
+        headers["Vary"] = "Accept-Encoding"
+    if not_modified(request, item.etag):
+        return Response(status_code=304, headers=headers)
+    return Response(item.body, media_type=item.media_type, headers=headers)
+
+
+def accepts_gzip(request: Request) -> bool:
+    """True when the client's ``Accept-Encoding`` allows gzip."""
+    for part in request.headers.get("accept-encoding", "").lower().split(","):
+        coding, _, params = part.strip().partition(";")
+        if coding.strip() in ("gzip", "*") and params.replace(" ", "") not in ("q=0", "q=0.0"):
+            return True
+    return False
+
+
+def gzip_prepared(data: bytes, media_type: str, etag: str) -> Prepared:
+    """``data`` compressed once, to be served as is to clients that accept gzip."""
+    return Prepared(gzip.compress(data, 6, mtime=0), media_type, etag, gzipped=True)
+
+
+def answer_gzipped(request: Request, item: Prepared, cache_control: str = IMMUTABLE) -> Response:
+    """A gzip-stored ``item``: its bytes to clients that accept gzip, inflated for others.
+
+    The two encodings carry different strong tags (``"sha"`` and ``"sha.gz"``); either one
+    in ``If-None-Match`` answers 304.
+    """
+    gz = accepts_gzip(request)
+    etag = item.etag[:-1] + '.gz"' if gz else item.etag
+    headers = {"ETag": etag, "Cache-Control": cache_control, "Vary": "Accept-Encoding"}
+    if not_modified(request, item.etag) or not_modified(request, item.etag[:-1] + '.gz"'):
+        return Response(status_code=304, headers=headers)
+    if gz:
+        headers["Content-Encoding"] = "gzip"
+        return Response(item.body, media_type=item.media_type, headers=headers)
+    return Response(gzip.decompress(item.body), media_type=item.media_type, headers=headers)
+
+
+def _engine(request: Request) -> Engine:
+    return request.app.state.engine
+
+
+def event_version(request: Request, event_id: int) -> int | None:
+    """The event's ``results_version`` (None: no such event); one primary-key read."""
+    with _engine(request).connect() as connection:
+        query = select(Event.results_version).where(Event.id == event_id)
+        return connection.execute(query).scalar()
+
+
+def league_version(request: Request) -> tuple[int, int, int]:
+    """What changes whenever any event is added or any event's results change: the count
+    and highest id of events and the sum of their ``results_version``."""
+    query = select(
+        func.count(Event.id), func.coalesce(func.max(Event.id), 0),
+        func.coalesce(func.sum(Event.results_version), 0),
+    )  # fmt: skip
+    with _engine(request).connect() as connection:
+        count, top, total = connection.execute(query).one()
+        return int(count), int(top), int(total)
+
+
+def race_version(request: Request, race_id: int) -> tuple[int, int, str | None] | None:
+    """The race's event id, that event's ``results_version`` and the race's trace digest
+    (None: no such race); one indexed join."""
+    query = (
+        select(Race.event_id, Event.results_version, Race.trace_sha256)
+        .join(Event, Race.event_id == Event.id)
+        .where(Race.id == race_id)
+    )
+    with _engine(request).connect() as connection:
+        row = connection.execute(query).first()
+        return None if row is None else (row[0], row[1], row[2])
