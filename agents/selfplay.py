@@ -103,10 +103,15 @@ class OpponentPool:
         """``count`` opponents drawn (with replacement) by PFSP weights."""
         if not self.entries:
             raise ValueError("the opponent pool is empty")
-        names = list(self.entries)
-        weights = pfsp_weights([self.entries[n].win_rate for n in names])
-        picks = self.rng.choice(len(names), size=count, p=weights)
+        probabilities = self.probabilities()
+        names = list(probabilities)
+        picks = self.rng.choice(len(names), size=count, p=list(probabilities.values()))
         return [(names[i], self.entries[names[i]].graph) for i in picks]
+
+    def probabilities(self) -> dict[str, float]:
+        """Each opponent's chance of being drawn (:func:`pfsp_weights` of the win rates)."""
+        weights = pfsp_weights([e.win_rate for e in self.entries.values()])
+        return dict(zip(self.entries, weights.tolist(), strict=True))
 
     def win_rates(self) -> dict[str, float]:
         """Current win rate against every opponent."""

@@ -18,8 +18,11 @@ Run layout (``RUN`` = the output folder)::
 from __future__ import annotations
 
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from copy import deepcopy
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +68,22 @@ class TrainResult:
 
 def _rank() -> int:
     return int(os.getenv("RANK", "0"))
+
+
+@contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) that arrives in the block until the block has run."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught and callable(previous):
+        previous(signal.SIGINT, None)  # Python's default handler raises KeyboardInterrupt
 
 
 class Trainer:
@@ -234,10 +253,12 @@ class Trainer:
                 before = self._checkpoint(runner, finished, finished_at, copy=True)
                 losses = runner.iteration(it)
                 stats = self._finish_iteration(runner, env, pool, it, elapsed(), losses)
-                if stats.eval is not None:
-                    self._save(self._checkpoint(runner, it, stats.elapsed_s))
-                    saved = it
-                finished, finished_at, before = it, stats.elapsed_s, None
+                with _sigint_deferred():  # the iteration's outputs are written whole
+                    self._write_outputs(stats)
+                    if stats.eval is not None:
+                        self._save(self._checkpoint(runner, it, stats.elapsed_s))
+                        saved = it
+                    finished, finished_at, before = it, stats.elapsed_s, None
                 self._record(result, stats)
                 if on_iteration is not None:
                     on_iteration(stats)
@@ -275,7 +296,7 @@ class Trainer:
         elapsed: float,
         losses: dict[str, float],
     ) -> IterationStats:
-        """After an update: the pool learns the results, simtrace, evaluation, metrics."""
+        """After an update: the pool learns the results, simtrace, evaluation; the stats."""
         episodes = env.pop_episodes()
         simtrace = env.drain_simtrace()
         if pool is not None:
@@ -284,13 +305,13 @@ class Trainer:
             self._write_training_simtrace(it, simtrace)
             self.dr_metrics.add_training(episodes)
         evaluation = self._evaluate(runner) if self._evaluation_due(it) else None
-        stats = IterationStats.of_iteration(
-            it, elapsed, len(simtrace), episodes, losses, evaluation
-        )
+        return IterationStats.of_iteration(it, elapsed, len(simtrace), episodes, losses, evaluation)
+
+    def _write_outputs(self, stats: IterationStats) -> None:
+        """``TrainingMetrics.json``, then the iteration's ``metrics.csv`` row and graph."""
         if self.writes_run_folder:
-            self._write_metrics(stats)
             self.dr_metrics.write()
-        return stats
+            self._write_metrics(stats)
 
     def _write_training_simtrace(self, it: int, rows: list[dict[str, Any]]) -> None:
         write_simtrace(self.run_dir / "0" / "training-simtrace" / f"{it}-iteration.csv", rows)
@@ -361,6 +382,7 @@ class Trainer:
     def _package(self, result: TrainResult) -> Path:
         best = {"best_lap": result.best_lap} if result.best_lap is not None else {}
         return pack_run(self.run_dir, self.run_dir / "model" / "model.zip", best)
+
 
 def _load_run(run_dir: str | Path, device: str) -> tuple[torch.nn.Module, TrainSettings, dict]:
     """A run's actor (weights of ``checkpoints/last.pt``), settings and checkpoint."""

@@ -13,8 +13,10 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import threading
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +31,30 @@ from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
 from arena.env import RacingEnv
 from arena.simtrace import simtrace_row, step_facts
+
+
+class RaceStepError(RuntimeError):
+    """A race failed to step; the message names the race, car, step and the cause."""
+
+
+def _naming_failures(fn: Callable[[dict], Any], car: str) -> Callable[[dict], Any]:
+    """``fn`` whose exceptions become a :class:`RaceStepError` naming the car, the step,
+    the exception and the line of ``fn``'s file it came from (else the deepest line)."""
+    source = getattr(getattr(fn, "__code__", None), "co_filename", None)
+
+    def reward(params: dict) -> Any:
+        try:
+            return fn(params)
+        except Exception as exc:
+            frames = traceback.extract_tb(exc.__traceback__)
+            frame = next((f for f in reversed(frames) if f.filename == source), frames[-1])
+            where = f"{frame.filename}, line {frame.lineno}"
+            raise RaceStepError(
+                f"reward function of car {car!r} raised at step {params.get('steps')} "
+                f"({where}): {type(exc).__name__}: {exc}"
+            ) from exc
+
+    return reward
 
 
 @dataclass
@@ -76,8 +102,9 @@ class EnvGroup:
     ) -> None:
         config = RaceConfig.from_json(config_json)
         reward_fn = resolve_reward(reward, config.race_type)
+        rewards = {car.name: _naming_failures(reward_fn, car.name) for car in config.cars}
         self.envs = [
-            RacingEnv(config.model_copy(update={"seed": s}), reward_functions=reward_fn)
+            RacingEnv(config.model_copy(update={"seed": s}), reward_functions=rewards)
             for s in seeds
         ]
         self.learners = set(learner_cars)
@@ -125,8 +152,10 @@ class EnvGroup:
             commands = {car: self._action(i, car, actions, slot_of) for car in env.agents}
             try:
                 obs, rew, term, trunc, infos = env.step(commands)
-            except Exception as exc:  # the user's reward function, mostly
-                raise RuntimeError(f"race {i}: {type(exc).__name__}: {exc}") from exc
+            except RaceStepError as exc:  # the user's reward function raised
+                raise RaceStepError(f"race {i}: {exc}") from exc.__cause__
+            except Exception as exc:  # e.g. the arena's check of a reward's value
+                raise RaceStepError(f"race {i}: {type(exc).__name__}: {exc}") from exc
             poses = env.car_poses()
             for car in commands:
                 self.last_obs[(i, car)] = obs[car]
@@ -213,6 +242,8 @@ def _worker(conn: Any, kwargs: dict[str, Any]) -> None:
             return
         try:
             conn.send(("ok", getattr(group, command)(*args)))
+        except RaceStepError as exc:
+            conn.send(("error", str(exc)))
         except Exception as exc:
             conn.send(("error", f"{type(exc).__name__}: {exc}"))
 
@@ -277,21 +308,34 @@ class RacingVecEnv(VecEnv):
         self._local: EnvGroup | None = None
         self._conns: list[Any] = []
         self._procs: list[Any] = []
-        if workers == 0:
-            self._local = EnvGroup(**kwargs[0])
-        else:
-            self._start_workers(kwargs)
-        self._obs = self._to_tensordict(self._call("reset"))
+        try:
+            if workers == 0:
+                self._local = EnvGroup(**kwargs[0])
+            else:
+                self._start_workers(kwargs)
+            self._obs = self._to_tensordict(self._call("reset"))
+        except BaseException:  # a worker failed to start, or Ctrl-C: stop the others
+            self.close()
+            raise
 
     # ---------------------------------------------------------------- workers
     def _start_workers(self, kwargs: list[dict[str, Any]]) -> None:
+        """Spawn the workers with SIGINT ignored (inherited through exec, so a Ctrl-C
+        while they import cannot kill them); the trainer handles Ctrl-C and closes them."""
         ctx = mp.get_context("spawn")
-        for kw in kwargs:
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, kw), daemon=True)
-            proc.start()
-            self._conns.append(parent)
-            self._procs.append(proc)
+        main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+        try:
+            for kw in kwargs:
+                parent, child = ctx.Pipe()
+                proc = ctx.Process(target=_worker, args=(child, kw), daemon=True)
+                proc.start()
+                child.close()
+                self._conns.append(parent)
+                self._procs.append(proc)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
         for conn in self._conns:
             self._receive(conn)
 
@@ -313,7 +357,15 @@ class RacingVecEnv(VecEnv):
             return [getattr(self._local, command)(*args[0])]
         for conn, a in zip(self._conns, args, strict=True):
             conn.send((command, a))
-        return [self._receive(conn) for conn in self._conns]
+        results, failure = [], None
+        for conn in self._conns:  # read every reply, so none is left in a pipe
+            try:
+                results.append(self._receive(conn))
+            except RuntimeError as exc:
+                failure = failure or exc
+        if failure is not None:
+            raise failure
+        return results
 
     # ------------------------------------------------------------- rsl-rl API
     def get_observations(self) -> TensorDict:
@@ -378,13 +430,16 @@ class RacingVecEnv(VecEnv):
         for conn in self._conns:
             try:
                 conn.send(("close", ()))
-                conn.recv()
+                while conn.poll(5) and conn.recv() != ("ok", None):
+                    pass  # a reply the caller did not read (Ctrl-C mid-step)
             except (OSError, EOFError):
                 pass
+            conn.close()
         for proc in self._procs:
             proc.join(timeout=5)
             if proc.is_alive():
                 proc.terminate()
+                proc.join(timeout=5)
         self._conns, self._procs = [], []
 
     def _to_tensordict(self, batches: list[StepBatch]) -> TensorDict:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 import torch
 from tensordict import TensorDict
@@ -84,13 +86,15 @@ def test_camera_and_continuous_actions():
         env.close()
 
 
-def test_reward_errors_surface_from_workers(tmp_path):
+def test_reward_errors_in_process_name_the_race_car_step_and_line(tmp_path):
+    """In-process (``num_workers=0``); through worker processes: test_train_workers.py."""
     bad = tmp_path / "reward.py"
     # Fine on the load-time pre-check's steps 1-5, dividing by zero on step 9 of the race.
     bad.write_text("def reward_function(params):\n    return 1.0 / (params['steps'] - 9)\n")
     env = RacingVecEnv(_config(sensors=("lidar",)), str(bad), num_races=1, num_workers=0)
+    message = f"race 0: reward function of car 'car0' raised at step 9 ({bad}, line 2): "
     try:
-        with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+        with pytest.raises(RuntimeError, match=re.escape(message + "ZeroDivisionError")):
             for _ in range(9):
                 env.step(_one_hot(env, 4))
     finally:
