@@ -52,7 +52,7 @@ from arena.spawn import (
     respawn_place,
     start_arc,
 )
-from tracks.track import Projection
+from tracks.track import Projection, Track
 
 RewardFunction = Callable[[dict[str, Any]], float]
 CAR_COLORS = [
@@ -73,6 +73,22 @@ GRID_STREAM, NOISE_STREAM = 0, 1
 # Lidar culling circles reach this far beyond an object's footprint: a car tilting in a
 # collision leans a little outside it.
 LIDAR_CULL_MARGIN = 0.03
+
+
+_CAMERAS: dict[bytes, CameraRenderer] = {}
+CAMERA_CACHE_SIZE = 4
+
+
+def track_camera(track: Track) -> CameraRenderer:
+    """The camera renderer of ``track``'s geometry, built once per process and reused by
+    every env on it (it holds no race state; a few recent tracks are kept)."""
+    arrays = (track.waypoints, track.left, track.right)
+    key = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in arrays)).digest()
+    camera = _CAMERAS.pop(key, None) or CameraRenderer(track)
+    _CAMERAS[key] = camera  # most recent last
+    while len(_CAMERAS) > CAMERA_CACHE_SIZE:
+        del _CAMERAS[next(iter(_CAMERAS))]
+    return camera
 
 
 def substream(seq: np.random.SeedSequence, *key: int) -> np.random.SeedSequence:
@@ -207,7 +223,7 @@ class RacingEnv(ParallelEnv):
             time_limit_s=config.time_limit_s,
         )
         self._needs_camera = any(s in IMAGE_SENSORS for c in config.cars for s in c.sensors)
-        self._camera = CameraRenderer(self.track) if self._needs_camera else None
+        self._camera = track_camera(self.track) if self._needs_camera else None
         self._waypoints = [tuple(map(float, w)) for w in self.track.waypoints]
         self._check_fits()
         self._client: int | None = None

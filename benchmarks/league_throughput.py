@@ -7,23 +7,34 @@ burst), while real ``python -m league.worker`` processes (already started and id
 the queue. Random-weight models never finish, so the event's time limit is
 60 s of simulated time: 900 control steps, the length of 3 laps at the pure-pursuit bot's
 pace (about 20 s a lap). Reported per case: evaluations per hour (entry of the first job
-to the last result committed) and the queue latency from entry to leaderboard row (median
-under load, and for a single entry into an idle league).
+to the last result committed), the CPU seconds the workers and their race children spent
+per evaluation (what load on a shared machine does not change) and the queue latency from
+entry to leaderboard row (median under load, and for a single entry into an idle league).
+
+``--profile`` splits one evaluation into its phases instead, in CPU milliseconds, run in
+this process the way a worker runs them (the phases the warm sandbox removed are listed
+too). ``--quick`` is a short run: 2 workers only, few jobs.
 
 Run: ``.venv/bin/python benchmarks/league_throughput.py [--lidar-jobs 24 --camera-jobs 8]``
+``[--quick] [--profile]``
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from datetime import timedelta
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from onnx import TensorProto, helper, numpy_helper
@@ -32,16 +43,27 @@ from rich.table import Table
 from sqlalchemy import func, select
 
 from arena.actions import default_discrete_space
+from arena.camera import CameraRenderer
+from arena.config import resolve_track
+from arena.env import RacingEnv
+from arena.race import RaceResult, run_race
 from league import crud
 from league.db import make_engine, make_session_factory
+from league.evaluation import build_plan, decode_plan, encode_plan, policies
 from league.migrations import upgrade
 from league.models import Entry, Event, Job, Model, Race, Racer, utcnow
+from league.queue import lease_job
+from league.sandbox import SandboxLimits, WarmSandbox, run_limited
 from league.schemas import EventCreate
 from league.settings import Settings
 from league.storage import Storage
-from submissions import pack, validate
+from league.worker import race_answer, record_result
+from submissions import load_policy, pack, validate
 
 ROOT = Path(__file__).resolve().parents[1]
+RACES = 5
+"""Races per measured race phase in ``--profile`` (the least CPU time counts)."""
+LIMITS = SandboxLimits()
 N_ACTIONS = default_discrete_space().n
 
 
@@ -177,10 +199,32 @@ class Bench:
         return procs
 
 
+def _cpu_seconds(pid: int) -> float:
+    """CPU time of a live process and of its children: reaped ones and (one level) live ones."""
+    tick = os.sysconf("SC_CLK_TCK")
+    with open(f"/proc/{pid}/stat") as handle:
+        fields = handle.read().rsplit(")", 1)[1].split()
+    total = sum(int(f) for f in fields[11:15]) / tick  # utime stime cutime cstime
+    with open(f"/proc/{pid}/task/{pid}/children") as handle:
+        for child in handle.read().split():
+            with contextlib.suppress(OSError):  # gone meanwhile: in cutime now, or lost (rare)
+                total += _cpu_seconds(int(child))
+    return total
+
+
+def _stop(proc: subprocess.Popen) -> float:
+    """SIGTERM a worker, reap it; its CPU seconds and its reaped children's."""
+    proc.terminate()
+    _, _, usage = os.wait4(proc.pid, 0)
+    proc.returncode = 0
+    return usage.ru_utime + usage.ru_stime
+
+
 def run_case(bench: Bench, sensor: str, jobs: int, workers: int) -> dict[str, float]:
-    """Evaluations per hour and latencies for one sensor and worker count."""
+    """Evaluations per hour, CPU per evaluation and latencies for one sensor and worker count."""
     models = [bench.upload(sensor) for _ in range(jobs + 1)]
     procs = bench.workers(workers)
+    cpu = 0.0
     try:
         since = bench.last_entry()
         bench.enter(models.pop())  # one entry into an idle league
@@ -188,6 +232,7 @@ def run_case(bench: Bench, sensor: str, jobs: int, workers: int) -> dict[str, fl
             time.sleep(0.05)
         idle = bench.latencies(since)[0]
         since = bench.last_entry()
+        cpu = -sum(_cpu_seconds(proc.pid) for proc in procs)
         start = time.monotonic()
         for model_id in models:
             bench.enter(model_id)
@@ -195,16 +240,108 @@ def run_case(bench: Bench, sensor: str, jobs: int, workers: int) -> dict[str, fl
             time.sleep(0.05)
         elapsed = time.monotonic() - start
     finally:
-        for proc in procs:
-            proc.terminate()
-            proc.wait()
+        cpu += sum(_stop(proc) for proc in procs)  # idle polling until the stop is in it too
     loaded = bench.latencies(since)
     return {
         "per_hour": jobs / elapsed * 3600,
         "seconds_per_eval": elapsed / jobs,
+        "cpu_per_eval": cpu / jobs,
         "idle_latency": idle,
         "median_latency": statistics.median(loaded),
     }
+
+
+def _cpu_ms(action: Callable[[], Any], repeats: int = 3) -> tuple[float, Any]:
+    """Least CPU milliseconds of this process and its reaped children over ``repeats`` calls
+    of ``action()``, and its last result."""
+
+    def now() -> float:
+        own, kids = (
+            resource.getrusage(w) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+        )
+        return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+    best, result = float("inf"), None
+    for _ in range(repeats):
+        start = now()
+        result = action()
+        best = min(best, 1000 * (now() - start))
+    return best, result
+
+
+def _warm_ms(handler: Callable[[bytes], object], request: bytes, runs: int) -> list[float]:
+    """CPU ms of each of ``runs`` requests to a warm child, worker's and child's (the child's
+    first request is not counted; the child's share is in clock ticks)."""
+    sandbox = WarmSandbox(handler, LIMITS, max_runs=runs + 2)
+    times = []
+    try:
+        sandbox.run(request)
+        assert sandbox.pid is not None
+        for _ in range(runs):
+            child = _cpu_seconds(sandbox.pid)
+            ms, _ = _cpu_ms(lambda: sandbox.run(request), 1)
+            times.append(ms + 1000 * (_cpu_seconds(sandbox.pid) - child))
+    finally:
+        sandbox.close()
+    return times
+
+
+def profile(bench: Bench, sensor: str) -> list[tuple[str, float, str]]:
+    """CPU ms of each phase of one evaluation (phase, ms, note), as a worker runs it."""
+    bench.enter(bench.upload(sensor))
+    with bench.sessions() as session:
+        job = session.scalars(select(Job).order_by(Job.id.desc())).first()
+        plan_ms, plan = _cpu_ms(lambda: build_plan(session, bench.storage, job))
+    (car,) = plan.cars
+    config = plan.config
+    track = resolve_track(config)[0]
+    request = encode_plan(plan)
+    drivers = policies(plan)
+
+    def fresh_env() -> None:
+        env = RacingEnv(config)
+        env.reset(seed=config.seed)
+        env.close()
+
+    env_ms = _cpu_ms(fresh_env)[0]
+    bare_ms = _cpu_ms(lambda: run_race(config, drivers, record_trace=False), RACES)[0]
+    race_ms, result = _cpu_ms(lambda: run_race(config, drivers, record_trace=True), RACES)
+    text = json.dumps(result.to_dict(), separators=(",", ":")).encode()
+    json_ms = _cpu_ms(lambda: RaceResult.from_dict(json.loads(json.dumps(result.to_dict()))))[0]
+    with bench.sessions() as session:
+        lease = lease_job(session, "profile", 60.0)
+    assert lease is not None
+    names = {car.name: car.entry_id}
+    with bench.sessions() as session:
+        record = _cpu_ms(lambda: record_result(session, bench.storage, lease, result, names), 1)
+    fork_ms = _cpu_ms(lambda: run_limited(lambda: None, LIMITS), 10)[0]
+    fresh_race_ms = _cpu_ms(lambda: run_limited(lambda: race_answer(plan), LIMITS), RACES)[0]
+    warm_race_ms = min(_warm_ms(lambda r: race_answer(decode_plan(r)), request, RACES))
+    stored_ms = _cpu_ms(lambda: load_policy(car.model, non_finite="raise", run_policy=False))[0]
+    full_ms = _cpu_ms(lambda: load_policy(car.model, non_finite="raise"))[0]
+    camera_ms = _cpu_ms(lambda: CameraRenderer(track))[0] if sensor == "camera" else 0.0
+    return [
+        ("build the plan (database, model sha256)", plan_ms, "worker"),
+        (
+            "plan to the warm child and back (pipe)",
+            statistics.mean(_warm_ms(lambda r: None, request, 50)),
+            "both",
+        ),
+        ("load the model: static checks + session", stored_ms, "child"),
+        ("env build: physics world, cars, grid", env_ms, "child, every race"),
+        (f"racing: {result.steps} control steps", bare_ms - env_ms, "child"),
+        ("trace recording (record_trace=True)", race_ms - bare_ms, "child"),
+        ("answer JSON: encode, decode, from_dict", json_ms, f"{len(text) // 1024} KiB"),
+        ("record the result (DB, trace file)", record[0], "worker"),
+        ("-- removed: fork per race", fork_ms, "now once per child"),
+        (
+            "-- removed: copy-on-write, first race",
+            fresh_race_ms - warm_race_ms - fork_ms,
+            "once per child",
+        ),
+        ("-- removed: behaviour re-validation", full_ms - stored_ms, "done at upload"),
+        ("-- removed: camera renderer build", camera_ms, "once per track and child"),
+    ]
 
 
 def main() -> None:
@@ -213,25 +350,54 @@ def main() -> None:
     parser.add_argument("--lidar-jobs", type=int, default=16)
     parser.add_argument("--camera-jobs", type=int, default=8)
     parser.add_argument("--database-url", default=None)
+    parser.add_argument("--quick", action="store_true", help="2 workers only, 8 + 4 jobs")
+    parser.add_argument("--profile", action="store_true", help="phases of one evaluation")
     args = parser.parse_args()
-    table = Table(title="Time-trial evaluations (3 laps' worth: 900 steps), beginner_loop")
-    for column in ("model", "workers", "evals / hour", "s / eval", "idle latency s", "p50 s"):
-        table.add_column(column, justify="right")
     with tempfile.TemporaryDirectory() as tmp:
         bench = Bench(Path(tmp), args.database_url)
-        for sensor, jobs in (("lidar", args.lidar_jobs), ("camera", args.camera_jobs)):
-            for workers in (1, 2):
-                row = run_case(bench, sensor, jobs, workers)
-                table.add_row(
-                    sensor,
-                    str(workers),
-                    f"{row['per_hour']:.0f}",
-                    f"{row['seconds_per_eval']:.2f}",
-                    f"{row['idle_latency']:.2f}",
-                    f"{row['median_latency']:.1f}",
-                )
+        table = print_profile(bench) if args.profile else throughput(bench, args)
         bench.engine.dispose()
-    Console().print(table)
+    Console(width=120).print(table)
+    print(f"1-min load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+
+
+def print_profile(bench: Bench) -> Table:
+    """The per-phase table of one lidar and one camera evaluation."""
+    table = Table(title="One evaluation, CPU ms per phase (900 steps, beginner_loop)")
+    for column in ("phase", "lidar ms", "camera ms", "where"):
+        table.add_column(column, justify="left" if column in ("phase", "where") else "right")
+    lidar, camera = profile(bench, "lidar"), profile(bench, "camera")
+    for (phase, ms, where), (_, cam_ms, _) in zip(lidar, camera, strict=True):
+        table.add_row(phase, f"{ms:.1f}", f"{cam_ms:.1f}", where)
+    now = [
+        sum(ms for phase, ms, _ in rows if not phase.startswith("--")) for rows in (lidar, camera)
+    ]
+    table.add_row("one evaluation now (sum)", f"{now[0]:.0f}", f"{now[1]:.0f}", "")
+    return table
+
+
+def throughput(bench: Bench, args: argparse.Namespace) -> Table:
+    """Run every case; the table."""
+    table = Table(title="Time-trial evaluations (3 laps' worth: 900 steps), beginner_loop")
+    columns = ("model", "workers", "evals / hour", "s / eval", "CPU s / eval", "idle latency s")
+    for column in (*columns, "p50 s"):
+        table.add_column(column, justify="right")
+    jobs = {"lidar": args.lidar_jobs, "camera": args.camera_jobs}
+    if args.quick:
+        jobs = {"lidar": 8, "camera": 4}
+    for sensor, count in jobs.items():
+        for workers in (2,) if args.quick else (1, 2):
+            row = run_case(bench, sensor, count, workers)
+            table.add_row(
+                sensor,
+                str(workers),
+                f"{row['per_hour']:.0f}",
+                f"{row['seconds_per_eval']:.2f}",
+                f"{row['cpu_per_eval']:.2f}",
+                f"{row['idle_latency']:.2f}",
+                f"{row['median_latency']:.1f}",
+            )
+    return table
 
 
 if __name__ == "__main__":

@@ -1,13 +1,14 @@
 """What a job races: the config from the event's frozen ruleset, its cars and its seed.
 
-A :class:`RacePlan` is plain JSON-ready data (the config, and per car either a model file's
-bytes or a bot name), built in the worker from the database; :func:`policies` turns it into
-drivers inside the sandboxed child, loading submitted models only through
-``submissions.load_policy``.
+A :class:`RacePlan` is plain data (the config, and per car either a model file's bytes or a
+bot name), built in the worker from the database and sent to the sandboxed child as bytes
+(:func:`encode_plan`, never pickle); :func:`policies` turns it into drivers inside the
+child, loading submitted models only through ``submissions.load_policy``.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -94,8 +95,34 @@ def build_plan(session: Session, storage: Storage, job: Job) -> RacePlan:
     return RacePlan(config, tuple(plans))
 
 
+def encode_plan(plan: RacePlan) -> bytes:
+    """``plan`` as bytes: an 8-byte header length, a JSON header, then the model files."""
+    cars = [
+        [c.name, c.entry_id, c.bot, None if c.model is None else len(c.model)] for c in plan.cars
+    ]
+    head = json.dumps({"config": json.loads(plan.config.to_json()), "cars": cars}).encode()
+    models = b"".join(c.model for c in plan.cars if c.model is not None)
+    return len(head).to_bytes(8, "big") + head + models
+
+
+def decode_plan(data: bytes) -> RacePlan:
+    """The plan :func:`encode_plan` wrote."""
+    offset = 8 + int.from_bytes(data[:8], "big")
+    head = json.loads(data[8:offset])
+    cars = []
+    for name, entry_id, bot, size in head["cars"]:
+        model = None if size is None else data[offset : offset + size]
+        offset += size or 0
+        cars.append(CarPlan(name, entry_id, model=model, bot=bot))
+    return RacePlan(RaceConfig.model_validate(head["config"]), tuple(cars))
+
+
 def policies(plan: RacePlan) -> dict[str, Policy]:
-    """Drivers for a plan (call in the sandbox: this runs submitted graphs)."""
+    """Drivers for a plan (call in the sandbox: this runs submitted graphs).
+
+    Model files were fully validated when stored and the plan's bytes were checked against
+    that sha256 (:func:`checked_model_bytes`), so only the static checks run again here.
+    """
     from agents.pursuit import PurePursuitPolicy
     from submissions import load_policy
 
@@ -106,7 +133,9 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
             # A graph can still output NaN on a real race's observations (the validator
             # tries random ones): the race stops with a clear error rather than letting
             # the car drive on sanitised garbage.
-            drivers[car.name] = load_policy(car.model, non_finite="raise", name=f"car {car.name}")
+            drivers[car.name] = load_policy(
+                car.model, non_finite="raise", name=f"car {car.name}", run_policy=False
+            )
         else:
             if track is None:
                 track = resolve_track(plan.config)[0]

@@ -1,7 +1,9 @@
 """Evaluation workers: lease a job, race it in the sandbox, record the result exactly once.
 
 One worker process runs one race at a time and is single-threaded (it forks the race
-child, so it must be). ``slipstream league worker --concurrency N`` runs a small supervisor
+child, so it must be). Races run in a warm sandbox child (:class:`league.sandbox.WarmSandbox`)
+forked once and reused for up to :data:`RACES_PER_CHILD` races, each under its own limits
+and in a fresh env. ``slipstream league worker --concurrency N`` runs a small supervisor
 that starts N such processes (``python -m league.worker``) with one BLAS/OpenMP thread each
 and restarts any that die. While a race runs the worker heartbeats its lease; the result,
 its per-car rows, the trace and the rating update are written in one transaction that
@@ -31,7 +33,7 @@ from sqlalchemy.orm import Session
 from arena.race import RaceResult, run_race
 from league import crud
 from league.db import make_engine, make_session_factory
-from league.evaluation import RacePlan, build_plan, policies
+from league.evaluation import RacePlan, build_plan, decode_plan, encode_plan, policies
 from league.models import Entry, Event, Job, Race
 from league.queue import (
     DB_ERRORS,
@@ -44,11 +46,15 @@ from league.queue import (
     lease_job,
 )
 from league.ranking import rate_race
-from league.sandbox import SandboxError, SandboxLimits, one_thread_env, run_limited
+from league.sandbox import SandboxError, SandboxLimits, WarmSandbox, one_thread_env
 from league.settings import Settings
 from league.storage import FileStore, StorageError, open_storage
 
 log = logging.getLogger("slipstream.worker")
+RACES_PER_CHILD = 50
+"""Races one warm sandbox child runs before it is replaced."""
+CHILD_HIGH_WATER_MB = 256
+"""Address space a warm child may gain over its size at fork before it is replaced."""
 
 
 class LeaseLost(RuntimeError):
@@ -58,6 +64,11 @@ class LeaseLost(RuntimeError):
 def race_answer(plan: RacePlan) -> dict[str, Any]:
     """Run the planned race (in the sandboxed child) and return it as JSON-ready data."""
     return run_race(plan.config, policies(plan), record_trace=True).to_dict()
+
+
+def answer_request(request: bytes) -> dict[str, Any]:
+    """The warm child's handler: race the plan :func:`league.evaluation.encode_plan` wrote."""
+    return race_answer(decode_plan(request))
 
 
 def record_result(
@@ -102,6 +113,12 @@ class Worker:
             cpu_seconds=settings.race_cpu_seconds,
             wall_seconds=settings.race_wall_seconds,
         )
+        self.sandbox = WarmSandbox(
+            answer_request,
+            self.limits,
+            max_runs=RACES_PER_CHILD,
+            high_water_mb=CHILD_HIGH_WATER_MB,
+        )
         self.stopping = False
         self.backoff = Backoff()
 
@@ -123,6 +140,7 @@ class Worker:
                 continue
             if not busy:
                 self._sleep(self.settings.poll_seconds)
+        self.sandbox.close()
         self.engine.dispose()
         log.info("worker %s stopped", self.name)
 
@@ -146,12 +164,15 @@ class Worker:
                 plan = build_plan(session, self.storage, session.get_one(Job, lease.job_id))
         except DB_ERRORS:
             raise
+        except StorageError as exc:  # the store is unreachable for now: try again later
+            self._fail(lease, f"could not read a model file: {exc}", retry=True)
+            return
         except Exception as exc:  # a bad stored model or ruleset: the job cannot run
             self._fail(lease, f"could not build the race: {exc}")
             return
         holder = [lease]
         try:
-            data = run_limited(lambda: race_answer(plan), self.limits, self._ticker(holder))
+            data = self.sandbox.run(encode_plan(plan), self._ticker(holder))
         except LeaseLost:
             log.warning("job %d: lease lost mid-race; result dropped", lease.job_id)
             return

@@ -48,15 +48,19 @@ def load_policy(
     *,
     non_finite: NonFiniteRule = "zero",
     name: str = "policy",
+    run_policy: bool = True,
 ) -> OnnxPolicy:
     """Validate a submission, then load its graph; raises :class:`InvalidSubmission`.
 
     ``non_finite`` and ``name`` are the runner's (:class:`submissions.runner.OnnxRunner`).
+    ``run_policy=False`` skips the behaviour stage (sample runs on random observations)
+    and keeps the archive, metadata and static graph checks: for a file that passed full
+    validation when it was stored and whose bytes were checked against that sha256.
     """
     data = read_source(source, limits)
     if isinstance(data, Problem):
         raise InvalidSubmission(ValidationReport(problems=(data,)))
-    report = validate(data, limits)
+    report = validate(data, limits, run_policy=run_policy)
     members, _ = read_archive(data, limits)
     if not report.ok or report.info is None or members is None:
         raise InvalidSubmission(report)

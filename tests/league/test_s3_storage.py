@@ -27,7 +27,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from league import crud
 from league.db import make_engine, make_session_factory
 from league.migrations import upgrade
-from league.models import Event
+from league.models import Event, Job
 from league.schemas import EventCreate
 from league.storage import DigestMismatch, StorageError, open_storage
 from league.storage_s3 import S3Storage
@@ -304,3 +304,28 @@ def test_a_league_whose_bucket_is_missing_answers_503(
             ready = client.get("/readyz")
         assert response.status_code == 503 and response.headers["Retry-After"] == "60"
         assert ready.status_code == 503 and "does not exist" in ready.json()["detail"]
+
+
+def test_a_worker_that_cannot_reach_the_store_requeues_the_job(
+    s3: S3Server, s3_env: None, tmp_path: Path
+) -> None:
+    """An object store down for a moment is not a bad model: the job runs once it is back."""
+    database = Database(f"sqlite:///{tmp_path / 'league.db'}", "sqlite")
+    options = {"storage_url": f"s3://{BUCKET}/requeue", "s3_endpoint_url": s3.endpoint}
+    for league in start_league(database, tmp_path / "data", **options):
+        model = upload(league, "alice", seed=3)
+        event = create_event(league, name="Outage Cup", laps=1, time_limit_s=10.0, seeds=[0])
+        enter(league, "alice", event["id"], model["id"])
+        unreachable = league.settings.model_copy(update={"s3_endpoint_url": "http://127.0.0.1:9"})
+        cut_off = Worker(unreachable, "cut-off-worker")
+        assert cut_off.run_once()
+        cut_off.engine.dispose()
+        with make_session_factory(make_engine(database.url))() as session:
+            (job,) = session.query(Job).all()
+            assert job.status == "queued" and "could not read a model file" in (job.error or "")
+        worker = Worker(league.settings, "s3-worker")
+        while worker.run_once():
+            pass
+        worker.engine.dispose()
+        with league.client() as client:
+            assert len(client.get("/api/races", params={"event": event["id"]}).json()) == 1
