@@ -17,6 +17,7 @@ import torch
 from rsl_rl.models import CNNModel, MLPModel
 
 from agents.hyperparameters import VALUE_LOSS_COEF
+from agents.networks import PooledCNNModel
 
 HUBER_DELTA = 1.0
 
@@ -38,3 +39,7 @@ class HuberMLPModel(_HuberValueGradient, MLPModel):
 
 class HuberCNNModel(_HuberValueGradient, CNNModel):
     """rsl-rl's ``CNNModel`` as a critic trained with the Huber value loss."""
+
+
+class HuberPooledCNNModel(_HuberValueGradient, PooledCNNModel):
+    """``agents.networks.PooledCNNModel`` as a critic trained with the Huber value loss."""

@@ -23,10 +23,13 @@ GAE_LAMBDA = 0.95
 # num_episodes_between_training is converted to steps with this estimate.
 STEPS_PER_EPISODE_ESTIMATE = 64
 VALUE_LOSS_COEF = 1.0
+# rsl-rl's PPO, learning from rewards scaled by the running std of the return.
+PPO_CLASS = "agents.return_scale:ReturnScaledPPO"
 # rsl-rl critic classes -> their Huber-loss variants (agents/huber.py).
 HUBER_CRITICS = {
     "MLPModel": "agents.huber:HuberMLPModel",
     "CNNModel": "agents.huber:HuberCNNModel",
+    "agents.networks:PooledCNNModel": "agents.huber:HuberPooledCNNModel",
 }
 
 
@@ -105,7 +108,7 @@ class Hyperparameters(BaseModel):
             "multi_gpu": None,
             "check_for_nan": True,  # agents.runner stops on NaN from the env, naming the iteration
             "algorithm": {
-                "class_name": "PPO",
+                "class_name": PPO_CLASS,
                 "learning_rate": self.lr,
                 "num_learning_epochs": self.num_epochs,
                 "num_mini_batches": mini_batches,

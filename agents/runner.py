@@ -47,6 +47,7 @@ class RacingRunner(OnPolicyRunner):
         # project's diff, which has no place in a run folder.
         self.logger.git_status_repos.clear()
         self._obs: TensorDict | None = None
+        self.timings = (0.0, 0.0)  # the last iteration's (collection, update) seconds
 
     def start(self) -> None:
         """What ``learn`` does before its first iteration: observations, train mode, synced
@@ -70,7 +71,8 @@ class RacingRunner(OnPolicyRunner):
         collected = time.monotonic()
         losses = self.alg.update()
         self.current_learning_iteration = it
-        self._log(it, collected - started, time.monotonic() - collected, losses)
+        self.timings = (collected - started, time.monotonic() - collected)
+        self._log(it, *self.timings, losses)
         return losses
 
     def learn(self, num_learning_iterations: int) -> None:

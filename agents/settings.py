@@ -16,10 +16,13 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from arena.actions import ActionSpace, DiscreteActionSpace
 from arena.config import RACE_TYPES, RaceType
+from arena.sensors_spec import IMAGE_SENSORS
 from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
+# The camera default before ``CPU CNN``: the preset of camera runs stored without one.
+FORMER_CAMERA_PRESET = "3-layer CNN"
 # Names used by ``training_settings.json`` files written before the fields took the
 # command line's names; such files still load.
 _FORMER_NAMES = {
@@ -117,5 +120,12 @@ def save_settings(run_dir: str | Path, settings: TrainSettings) -> Path:
 
 
 def load_settings(run_dir: str | Path) -> TrainSettings:
-    """The settings a run was started with (``RUN/training_settings.json``)."""
-    return TrainSettings.model_validate_json(settings_path(run_dir).read_text())
+    """The settings a run was started with (``RUN/training_settings.json``).
+
+    Runs store their preset by name; a camera run stored without one was trained when the
+    camera default was ``3-layer CNN``, so it gets that network back.
+    """
+    settings = TrainSettings.model_validate_json(settings_path(run_dir).read_text())
+    if settings.network is None and set(IMAGE_SENSORS) & set(settings.sensors):
+        return settings.model_copy(update={"network": FORMER_CAMERA_PRESET})
+    return settings

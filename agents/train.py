@@ -120,7 +120,7 @@ class Trainer:
     def _write_run_files(self) -> None:
         s = self.settings
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        save_settings(self.run_dir, s)
+        save_settings(self.run_dir, s.model_copy(update={"network": s.preset}))  # never re-derived
         self.hp.write(self.run_dir)
         lidar = arena.CarConfig(name="car0").lidar_config
         meta = DeepRacerMetadata(

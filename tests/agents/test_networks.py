@@ -22,6 +22,7 @@ CASES = [
     ("3-layer CNN", ("camera",), DISCRETE),
     ("5-layer CNN", ("stereo",), DISCRETE),
     ("3-layer CNN", ("camera", "lidar"), CONTINUOUS),
+    ("CPU CNN", ("camera",), CONTINUOUS),
     ("dense 256-256", ("lidar",), DISCRETE),
     ("dense 256-256", ("sector_lidar",), CONTINUOUS),
     ("dense 256-256", ("discretized_sector_lidar",), DISCRETE),

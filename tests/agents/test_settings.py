@@ -86,7 +86,11 @@ def test_settings_round_trip(tmp_path):
 
 def test_settings_files_with_the_former_field_names_still_load(tmp_path):
     current = TrainSettings(
-        action_space=SPACE, reward_fn="/r.py", opponent=("/m.zip",), eval_time_limit=9.0
+        action_space=SPACE,
+        reward_fn="/r.py",
+        opponent=("/m.zip",),
+        eval_time_limit=9.0,
+        network="CPU CNN",
     )
     data = json.loads(current.model_dump_json())
     for old, new in (
@@ -97,6 +101,22 @@ def test_settings_files_with_the_former_field_names_still_load(tmp_path):
         data[old] = data.pop(new)
     (tmp_path / "training_settings.json").write_text(json.dumps(data))
     assert load_settings(tmp_path) == current
+
+
+def test_camera_runs_stored_without_a_preset_keep_the_former_default(tmp_path):
+    """Such runs were trained when the camera default was the 3-layer CNN."""
+    save_settings(tmp_path, TrainSettings(action_space=SPACE, sensors=("camera",)))
+    assert load_settings(tmp_path).network == "3-layer CNN"
+    save_settings(tmp_path, TrainSettings(action_space=SPACE, sensors=("lidar",)))
+    assert load_settings(tmp_path).preset == "dense 256-256"
+
+
+def test_new_runs_store_their_preset_by_name(tmp_path):
+    from agents.train import Trainer
+
+    settings = TrainSettings(action_space=SPACE, sensors=("camera",), workers=0)
+    Trainer(settings, tmp_path)._write_run_files()
+    assert load_settings(tmp_path).network == "CPU CNN"
 
 
 def test_unknown_fields_are_refused():

@@ -1,0 +1,127 @@
+"""Training cost: where an iteration's time goes (collection vs PPO update).
+
+Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
+evaluations or run files) for each ``--workers`` value and prints one table: samples/s
+end to end, collection and update seconds per iteration, the update's share, the value
+loss of the last iteration. The first iteration is a warm-up and is not counted.
+``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
+time.
+
+Run::
+
+    .venv/bin/python benchmarks/train_profile.py --sensors camera --iterations 3
+    .venv/bin/python benchmarks/train_profile.py --sensors camera --preset "3-layer CNN" \\
+        --hyperparameters hp.json --workers 0,2 --profile
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import pstats
+import time
+from pathlib import Path
+
+import torch
+from rich.console import Console
+from rich.table import Table
+
+import arena
+from agents import networks
+from agents.action_spaces import parse_action_space_spec
+from agents.hyperparameters import Hyperparameters
+from agents.runner import RacingRunner
+from agents.vecenv import RacingVecEnv
+
+
+def measure(args: argparse.Namespace, workers: int, hp: Hyperparameters) -> dict[str, float]:
+    """Train ``args.iterations`` (+1 warm-up) iterations; mean timings and the last losses."""
+    sensors = tuple(args.sensors.split(","))
+    space = parse_action_space_spec(args.action_space)
+    preset = args.preset or networks.default_preset(sensors)
+    config = arena.make_config(sensors=sensors, action_space=space, mode="training", seed=0)
+    env = RacingVecEnv(config, args.reward, num_races=max(1, workers), num_workers=workers)
+    try:
+        actor, critic, groups = networks.model_configs(preset, sensors, space)
+        cfg = hp.to_rsl_rl(env.num_envs, actor, critic, groups, args.steps_per_env)
+        torch.manual_seed(0)
+        runner = RacingRunner(env, cfg, log_dir=None, device="cpu")
+        runner.start()
+        collect = update = 0.0
+        losses: dict[str, float] = {}
+        profiler = cProfile.Profile() if args.profile else None
+        for it in range(args.iterations + 1):
+            last = it == args.iterations
+            if profiler is not None and last:
+                profiler.enable()
+            losses = runner.iteration(it)
+            if it > 0:
+                collect += runner.timings[0]
+                update += runner.timings[1]
+        if profiler is not None:
+            profiler.disable()
+            out = io.StringIO()
+            pstats.Stats(profiler, stream=out).sort_stats("tottime").print_stats(18)
+            print(f"--- profile of iteration {args.iterations} (workers={workers}) ---")
+            print(out.getvalue())
+        samples = cfg["num_steps_per_env"] * env.num_envs
+        n = args.iterations
+        algorithm = cfg["algorithm"]
+        return {
+            "workers": workers,
+            "preset": preset,
+            "samples": samples,
+            "minibatches": algorithm["num_mini_batches"] * algorithm["num_learning_epochs"],
+            "samples_per_s": samples * n / (collect + update),
+            "collect_s": collect / n,
+            "update_s": update / n,
+            "value_loss": losses["value"],
+        }
+    finally:
+        env.close()
+
+
+def main() -> None:
+    """Parse arguments, measure each worker count, print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--preset", default=None, help="network preset (default: by sensors)")
+    parser.add_argument("--sensors", default="camera")
+    parser.add_argument("--action-space", default="continuous:-30:30:0.5:2")
+    parser.add_argument("--reward", default="follow_center_line")
+    parser.add_argument("--iterations", type=int, default=3)
+    parser.add_argument("--hyperparameters", type=Path, default=None)
+    parser.add_argument("--steps-per-env", type=int, default=None)
+    parser.add_argument("--workers", default="0", help="comma-separated, e.g. 0,2")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument("--profile", action="store_true")
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
+    rows = [measure(args, int(w), hp or Hyperparameters()) for w in args.workers.split(",")]
+    table = Table(title=f"training cost: {args.sensors}, {args.iterations} iterations")
+    for column in (
+        "workers", "preset", "samples/it", "minibatches/it", "samples/s",
+        "collect s/it", "update s/it", "update share", "value loss",
+    ):  # fmt: skip
+        table.add_column(column)
+    for r in rows:
+        total = r["collect_s"] + r["update_s"]
+        table.add_row(
+            str(r["workers"]),
+            str(r["preset"]),
+            str(r["samples"]),
+            str(r["minibatches"]),
+            f"{r['samples_per_s']:.0f}",
+            f"{r['collect_s']:.2f}",
+            f"{r['update_s']:.2f}",
+            f"{r['update_s'] / total:.0%}",
+            f"{r['value_loss']:.3g}",
+        )
+    Console(width=140).print(table)
+
+
+if __name__ == "__main__":
+    started = time.monotonic()
+    main()
+    print(f"wall {time.monotonic() - started:.0f} s")
