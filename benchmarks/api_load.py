@@ -101,18 +101,24 @@ def cores() -> tuple[int, int]:
     return available[0], available[1 % len(available)]
 
 
-def start_server(url: str, data_dir: Path, port: int, core: int) -> subprocess.Popen:
-    """``slipstream league serve`` on ``core`` (rate limit off); wait until it answers."""
+def start_server(
+    url: str, data_dir: Path, port: int, core: int, tree: Path = ROOT
+) -> subprocess.Popen:
+    """``slipstream league serve`` of ``tree`` on ``core`` (rate limit off); wait until it
+    answers. Another ``tree`` (an older checkout) measures that code against the same data."""
     env = {
         **os.environ,
         "SLIPSTREAM_DATABASE_URL": url,
         "SLIPSTREAM_RATE_LIMIT_PER_SECOND": "0",
+        "PYTHONPATH": str(tree),
     }
-    args = ["serve", "--port", str(port), "--data-dir", str(data_dir), "--no-access-log"]
+    args = ["serve", "--port", str(port), "--data-dir", str(data_dir)]
+    if tree == ROOT:
+        args.append("--no-access-log")  # older trees log every request (as they did)
     proc = subprocess.Popen(
         [sys.executable, "-m", "league", *args],
         env=env,
-        cwd=ROOT,
+        cwd=tree,
         preexec_fn=lambda: os.sched_setaffinity(0, {core}),
     )
     deadline = time.monotonic() + 60
@@ -161,7 +167,7 @@ def wrk(url: str, connections: int, seconds: float, core: int, **options: object
     if options.get("script"):
         command += ["-s", str(options["script"])]
     out = subprocess.run([*command, url], capture_output=True, text=True, check=True).stdout
-    latency = dict(re.findall(r"^\s+(50|99)%\s+(\S+)$", out, re.MULTILINE))
+    latency = dict(re.findall(r"^\s+(50|99)%\s+(\S+)\s*$", out, re.MULTILINE))
     if "50" not in latency or "99" not in latency:
         raise RuntimeError(f"wrk printed no latency distribution:\n{out}")
     errors = sum(int(n) for n in re.findall(r"Non-2xx or 3xx responses: (\d+)", out))
@@ -177,7 +183,7 @@ def measure(url: str, args: argparse.Namespace, label: str) -> list[str]:
     with tempfile.TemporaryDirectory() as folder:
         data_dir = Path(folder)
         event, race = seed(url, data_dir, args.racers, args.races)
-        proc = start_server(url, data_dir, args.port, server_core)
+        proc = start_server(url, data_dir, args.port, server_core, args.server_path.resolve())
         base = f"http://127.0.0.1:{args.port}"
         etag = httpx.get(f"{base}/api/events/{event}/leaderboard").headers.get("etag", "")
         pacer = data_dir / "pacer.lua"
@@ -224,6 +230,12 @@ def main() -> None:
     parser.add_argument("--racers", type=int, default=50)
     parser.add_argument("--races", type=int, default=3, help="races per racer")
     parser.add_argument("--port", type=int, default=8765)
+    parser.add_argument(
+        "--server-path",
+        type=Path,
+        default=ROOT,
+        help="serve another checkout (e.g. a git worktree of an older commit) on the same data",
+    )
     args = parser.parse_args()
     if shutil.which("wrk") is None or shutil.which("taskset") is None:
         sys.exit("benchmarks/api_load.py needs wrk and taskset: apt-get install wrk util-linux")

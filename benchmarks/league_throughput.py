@@ -180,16 +180,17 @@ class Bench:
         with self.sessions() as session:
             return session.scalar(select(func.max(Entry.id))) or 0
 
-    def workers(self, n: int) -> list[subprocess.Popen]:
-        """Start ``n`` worker processes and wait until they are idle."""
-        env = {**os.environ, "SLIPSTREAM_DATA_DIR": str(self.folder)}
+    def workers(self, n: int, tree: Path = ROOT) -> list[subprocess.Popen]:
+        """Start ``n`` worker processes of ``tree`` (default: this checkout; an older one
+        measures its code on the same data) and wait until they are idle."""
+        env = {**os.environ, "SLIPSTREAM_DATA_DIR": str(self.folder), "PYTHONPATH": str(tree)}
         env["SLIPSTREAM_DATABASE_URL"] = self.settings.db_url
         env["SLIPSTREAM_POLL_SECONDS"] = "0.2"
         env |= {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
         procs = [
             subprocess.Popen(
                 [sys.executable, "-m", "league.worker", "--name", f"bench{i}"],
-                cwd=ROOT,
+                cwd=tree,
                 env=env,
                 stderr=subprocess.DEVNULL,
             )
@@ -220,10 +221,13 @@ def _stop(proc: subprocess.Popen) -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def run_case(bench: Bench, sensor: str, jobs: int, workers: int) -> dict[str, float]:
-    """Evaluations per hour, CPU per evaluation and latencies for one sensor and worker count."""
+def run_case(
+    bench: Bench, sensor: str, jobs: int, workers: int, tree: Path = ROOT
+) -> dict[str, float]:
+    """Evaluations per hour, CPU per evaluation and latencies for one sensor and worker count
+    (workers of ``tree``)."""
     models = [bench.upload(sensor) for _ in range(jobs + 1)]
-    procs = bench.workers(workers)
+    procs = bench.workers(workers, tree)
     cpu = 0.0
     try:
         since = bench.last_entry()
@@ -352,6 +356,12 @@ def main() -> None:
     parser.add_argument("--database-url", default=None)
     parser.add_argument("--quick", action="store_true", help="2 workers only, 8 + 4 jobs")
     parser.add_argument("--profile", action="store_true", help="phases of one evaluation")
+    parser.add_argument(
+        "--worker-path",
+        type=Path,
+        default=ROOT,
+        help="run the workers of another checkout (e.g. a git worktree of an older commit)",
+    )
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         bench = Bench(Path(tmp), args.database_url)
@@ -387,7 +397,7 @@ def throughput(bench: Bench, args: argparse.Namespace) -> Table:
         jobs = {"lidar": 8, "camera": 4}
     for sensor, count in jobs.items():
         for workers in (2,) if args.quick else (1, 2):
-            row = run_case(bench, sensor, count, workers)
+            row = run_case(bench, sensor, count, workers, args.worker_path.resolve())
             table.add_row(
                 sensor,
                 str(workers),
