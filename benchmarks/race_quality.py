@@ -1,0 +1,345 @@
+"""Race quality per race type: train each for a fixed budget, then measure how it drives.
+
+For every race type (``time_trial``, ``object_avoidance``, ``head_to_bot``,
+``head_to_model``) it trains the recipe below (:data:`RECIPES`) for ``--minutes`` on a
+built-in track and prints one table: sensors, training minutes, samples/s, minutes to
+the first clean evaluation (3 laps, every lap done, no off-track; from ``metrics.csv``),
+the best evaluation lap and its ratio to the track's physical-limit lap (the racing line
+of the simulated car, ``agents.pursuit.car_limits`` + ``tracks.raceline``, as
+``slipstream tracks raceline`` reports it), and the off-tracks and collisions of the
+final evaluation (the last periodic one if it came after the last iteration, else one
+raced here on the final weights). ``head_to_model`` starts from the time-trial run
+(``clone``), trains against a pool of its own snapshots plus the time-trial model, and
+then races the time-trial parent :data:`H2M_RACES` seeded times: win rate, overtakes and
+at-fault collisions per race (the learner's, ``arena.racing_metrics``).
+
+Run::
+
+    .venv/bin/python benchmarks/race_quality.py --minutes 30 --out runs/race_quality
+    .venv/bin/python benchmarks/race_quality.py --only time_trial,head_to_model --minutes 10
+
+The table is also written as markdown to ``OUT/race_quality.md``. ``head_to_model``
+without ``time_trial`` in ``--only`` needs ``OUT/time_trial`` from an earlier run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+from agents import evaluate
+from agents.action_spaces import parse_action_space_spec
+from agents.evaluate import EvalSummary
+from agents.hyperparameters import Hyperparameters
+from agents.pursuit import car_limits
+from agents.selfplay import opponent_policy, read_policy_graph
+from agents.settings import TrainSettings, load_settings
+from agents.train import Trainer, TrainResult, load_actor, run_hyperparameters
+from arena.race import RaceResult, run_race
+from tracks.catalog import get_track
+from tracks.raceline import compute_racing_line
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """How one race type is trained (the fields of ``TrainSettings`` it sets)."""
+
+    race_type: str
+    sensors: tuple[str, ...]
+    action_space: str  # a spec for agents.action_spaces.parse_action_space_spec
+    reward_fn: str  # bundled sample name
+    track: str = "beginner_loop"
+    network: str | None = None  # None: the preset by sensors (camera: CPU CNN)
+    workers: int = 2
+    # DeepRacer's defaults (agents.hyperparameters); a field here overrides one.
+    hyperparameters: dict[str, Any] = field(default_factory=dict)
+    # head_to_model only: clone this recipe's run and race against its model.zip.
+    parent: str | None = None
+    selfplay: str = "shared"
+
+
+RECIPES: dict[str, Recipe] = {
+    "time_trial": Recipe(
+        race_type="time_trial",
+        sensors=("camera",),
+        action_space="continuous:-30:30:0.5:4",
+        reward_fn="pursuit",
+    ),
+    "object_avoidance": Recipe(
+        race_type="object_avoidance",  # arena.make_config's default obstacles section
+        sensors=("camera",),
+        action_space="continuous:-30:30:0.5:3",
+        reward_fn="object_avoidance",
+    ),
+    "head_to_bot": Recipe(
+        race_type="head_to_bot",  # arena.make_config's default bots section
+        sensors=("camera", "lidar"),
+        action_space="continuous:-30:30:0.5:3",
+        reward_fn="head_to_head",
+    ),
+    "head_to_model": Recipe(
+        race_type="head_to_model",
+        sensors=("camera",),  # the parent's: a clone needs the same sensors and preset
+        action_space="continuous:-30:30:0.5:4",  # the parent's number of actions
+        reward_fn="head_to_head",
+        parent="time_trial",
+        selfplay="pool",
+    ),
+}
+H2M_RACES = 20  # seeded races of the head-to-model learner against its parent
+H2M_LAPS = 3
+
+
+# --------------------------------------------------------------------------- training
+def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None) -> TrainSettings:
+    """The run's ``TrainSettings`` from a recipe and the command line."""
+    workers = recipe.workers if args.workers is None else args.workers
+    return TrainSettings(
+        track=recipe.track,
+        race_type=recipe.race_type,
+        sensors=recipe.sensors,
+        action_space=parse_action_space_spec(recipe.action_space),
+        reward_fn=recipe.reward_fn,
+        network=recipe.network,
+        workers=workers,
+        minutes=args.minutes,
+        eval_every=args.eval_every,
+        stop_on_clean_eval=False,
+        selfplay=recipe.selfplay,
+        opponent=(str(opponent),) if opponent else (),
+    )
+
+
+def train(name: str, args: argparse.Namespace) -> tuple[Path, TrainResult]:
+    """Train recipe ``name`` into ``OUT/name``; returns the run folder and the result."""
+    recipe = RECIPES[name]
+    run_dir = args.out / name
+    if run_dir.exists():
+        raise SystemExit(f"{run_dir} exists: give another --out (runs are not appended to)")
+    clone = opponent = None
+    if recipe.parent is not None:
+        clone = args.out / recipe.parent
+        opponent = parent_zip(clone)
+    settings = settings_of(recipe, args, opponent)
+    hp = Hyperparameters(**recipe.hyperparameters)
+    print(f"training {name} for {args.minutes:g} min -> {run_dir}", flush=True)
+    result = Trainer(settings, run_dir, hp, clone=clone).run()
+    if result.model_zip is None:
+        raise SystemExit(f"{name}: no iteration finished, so no model was written")
+    return run_dir, result
+
+
+def parent_zip(parent_dir: Path) -> Path:
+    """The parent run's packed model (it must have been trained first)."""
+    path = parent_dir / "model" / "model.zip"
+    if not path.is_file():
+        raise SystemExit(f"head_to_model needs the time-trial run's {path}: train time_trial first")
+    return path
+
+
+# ------------------------------------------------------------------------- measuring
+def read_metrics(run_dir: Path) -> list[dict[str, str]]:
+    """``RUN/metrics.csv`` as rows of strings (empty cell: no value)."""
+    with (run_dir / "metrics.csv").open(newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def first_clean_minutes(rows: list[dict[str, str]], laps: int) -> float | None:
+    """Minutes of training to the first evaluation with ``laps`` laps and no off-track."""
+    for row in rows:
+        if row["eval_laps"] and int(row["eval_laps"]) >= laps and row["eval_off_track"] == "0":
+            return float(row["elapsed_s"]) / 60.0
+    return None
+
+
+def final_evaluation(run_dir: Path, result: TrainResult) -> EvalSummary:
+    """The evaluation of the final weights: the trainer's if it evaluated the last
+    iteration, else a race of ``checkpoints/last.pt`` with the trainer's settings."""
+    last = result.iterations - 1
+    if result.evaluations and result.evaluations[-1].iteration == last:
+        summary = result.evaluations[-1].eval
+        assert summary is not None
+        return summary
+    actor, s = load_actor(run_dir)
+    config = evaluate.evaluation_config(
+        s.track,
+        s.race_type,
+        s.sensors,
+        s.action_space,
+        laps=s.eval_laps,
+        seed=s.seed,
+        time_limit_s=s.eval_time_limit,
+        stack_size=run_hyperparameters(run_dir).stack_size,
+        direction=s.direction,
+    )
+    race = evaluate.evaluate_policy(config, evaluate.TorchPolicy(actor, s.discrete))
+    return evaluate.summary(race)
+
+
+def physical_limit_lap(track: str) -> float:
+    """The track's physical-limit lap: the racing line at the simulated car's limits."""
+    return compute_racing_line(get_track(track), car_limits()).lap_time
+
+
+def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[str, float]:
+    """Race the learner's and the parent's greedy policies ``races`` seeded times.
+
+    Both drive their packed ``model.zip`` graphs (what a league race would run). The grid
+    alternates: the learner starts in ``car0`` (the front slot) on even seeds and in
+    ``car1`` on odd ones. A win is finishing ahead (``RaceResult.finish_order``).
+    """
+    s = load_settings(run_dir)
+    parent = load_settings(parent_dir)
+    learner_graph = read_policy_graph(run_dir / "model" / "model.zip")
+    parent_graph = read_policy_graph(parent_zip(parent_dir))
+    wins = overtakes = at_fault = 0
+    for seed in range(races):
+        config = evaluate.evaluation_config(
+            s.track,
+            "head_to_model",
+            s.sensors,
+            s.action_space,
+            laps=H2M_LAPS,
+            seed=seed,
+            time_limit_s=s.eval_time_limit,
+            num_cars=2,
+            stack_size=run_hyperparameters(run_dir).stack_size,
+            direction=s.direction,
+        )
+        learner_car, parent_car = ("car0", "car1") if seed % 2 == 0 else ("car1", "car0")
+        policies = {
+            learner_car: opponent_policy(learner_graph, s.discrete, name="learner"),
+            parent_car: opponent_policy(parent_graph, parent.discrete, name="parent"),
+        }
+        race: RaceResult = run_race(config, policies, record_trace=False)
+        learner = race.car(learner_car)
+        wins += race.finish_order.index(learner_car) < race.finish_order.index(parent_car)
+        overtakes += learner.overtakes
+        at_fault += learner.at_fault_collisions
+    return {
+        "win_rate": wins / races,
+        "overtakes": overtakes / races,
+        "at_fault": at_fault / races,
+    }
+
+
+def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namespace) -> dict:
+    """One table row's numbers for a trained run."""
+    s = load_settings(run_dir)
+    rows = read_metrics(run_dir)
+    elapsed = float(rows[-1]["elapsed_s"])
+    steps = sum(int(r["steps"]) for r in rows)
+    final = final_evaluation(run_dir, result)
+    laps = [float(r["eval_best_lap"]) for r in rows if r["eval_best_lap"]]
+    if final.best_lap is not None:
+        laps.append(final.best_lap)
+    best = min(laps, default=None)
+    row = {
+        "race_type": name,
+        "sensors": "+".join(s.sensors),
+        "minutes": elapsed / 60.0,
+        "samples_s": steps / elapsed if elapsed > 0 else 0.0,
+        "clean_min": first_clean_minutes(rows, s.eval_laps),
+        "best_lap": best,
+        "limit_ratio": best / physical_limit_lap(s.track) if best is not None else None,
+        "off_track": final.off_track,
+        "collisions": final.crashes,
+    }
+    parent = RECIPES[name].parent
+    if parent is not None:
+        print(f"racing {name} against {parent} ({args.races} races)", flush=True)
+        row |= races_against_parent(run_dir, args.out / parent, args.races)
+    return row
+
+
+# ---------------------------------------------------------------------------- output
+COLUMNS = (
+    ("race type", "race_type", "{}"),
+    ("sensors", "sensors", "{}"),
+    ("minutes", "minutes", "{:.1f}"),
+    ("samples/s", "samples_s", "{:.0f}"),
+    ("min to clean 3 laps", "clean_min", "{:.1f}"),
+    ("best lap (s)", "best_lap", "{:.2f}"),
+    ("best / limit", "limit_ratio", "{:.2f}"),
+    ("final eval off-tracks", "off_track", "{}"),
+    ("final eval collisions", "collisions", "{}"),
+    ("win rate vs parent", "win_rate", "{:.0%}"),
+    ("overtakes / race", "overtakes", "{:.2f}"),
+    ("at-fault collisions / race", "at_fault", "{:.2f}"),
+)
+
+
+def cells(row: dict) -> list[str]:
+    """A row's formatted cells ("-": no value)."""
+    return [fmt.format(row[key]) if row.get(key) is not None else "-" for _, key, fmt in COLUMNS]
+
+
+def title(args: argparse.Namespace) -> str:
+    """The table's title."""
+    tracks = sorted({RECIPES[n].track for n in args.only})
+    limits = ", ".join(f"{t} {physical_limit_lap(t):.2f} s" for t in tracks)
+    return f"race quality after {args.minutes:g} min per race type (physical-limit lap: {limits})"
+
+
+def markdown(rows: list[dict], heading: str) -> str:
+    """The table as GitHub markdown."""
+    lines = [f"**{heading}**", "", "| " + " | ".join(c for c, _, _ in COLUMNS) + " |"]
+    lines.append("|" + "---|" * len(COLUMNS))
+    lines += ["| " + " | ".join(cells(r)) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def parse_args() -> argparse.Namespace:
+    """The command line."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--minutes", type=float, default=30.0, help="training budget per type")
+    parser.add_argument(
+        "--only",
+        default=",".join(RECIPES),
+        help=f"comma-separated race types (default: all: {','.join(RECIPES)})",
+    )
+    parser.add_argument("--out", type=Path, help="keep the runs here (default: a temp dir)")
+    parser.add_argument("--workers", type=int, help="worker processes (default: the recipe's)")
+    parser.add_argument("--eval-every", type=int, default=5, help="evaluate every N iterations")
+    parser.add_argument("--races", type=int, default=H2M_RACES, help="head_to_model races")
+    args = parser.parse_args()
+    args.only = [n.strip() for n in args.only.split(",") if n.strip()]
+    unknown = [n for n in args.only if n not in RECIPES]
+    if unknown:
+        parser.error(f"unknown race type(s) {unknown}; choose from {', '.join(RECIPES)}")
+    return args
+
+
+def main() -> None:
+    """Train the selected race types in recipe order, measure them, print the table."""
+    args = parse_args()
+    with tempfile.TemporaryDirectory(prefix="race_quality-") as temp:
+        keep = args.out is not None
+        args.out = args.out or Path(temp)
+        args.out.mkdir(parents=True, exist_ok=True)
+        rows = []
+        for name in (n for n in RECIPES if n in args.only):  # parents before children
+            run_dir, result = train(name, args)
+            rows.append(measure(name, run_dir, result, args))
+        heading = title(args)
+        table = Table(title=heading)
+        for column, _, _ in COLUMNS:
+            table.add_column(column)
+        for row in rows:
+            table.add_row(*cells(row))
+        Console(width=200).print(table)
+        report = args.out / "race_quality.md"
+        report.write_text(markdown(rows, heading))
+        if keep:
+            print(f"runs and {report.name} kept in {args.out}")
+
+
+if __name__ == "__main__":
+    main()
