@@ -67,7 +67,7 @@ class TrainSettings(BaseModel):
         "(default: from num_episodes_between_training).",
     )
     eval_every: int = Field(
-        5, description="Evaluate every N iterations (and after the last of an iteration budget)."
+        5, description="Evaluate every N iterations (and after the iteration that ends the budget)."
     )
     eval_laps: int = Field(3, description="Laps of each evaluation race.")
     eval_time_limit: float = Field(120.0, description="Simulated seconds an evaluation may take.")

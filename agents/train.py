@@ -276,9 +276,9 @@ class Trainer:
             return True
         return s.minutes is not None and elapsed - self.elapsed_before >= 60.0 * s.minutes
 
-    def _last_iteration(self, it: int) -> bool:
-        s = self.settings
-        return s.iterations is not None and it + 1 - self.start_iteration >= s.iterations
+    def _last_iteration(self, it: int, elapsed: float) -> bool:
+        """Whether iteration ``it``, finished at ``elapsed`` seconds, spends the budget."""
+        return self._budget_spent(it + 1, elapsed)
 
     # ------------------------------------------------------ between iterations
     @staticmethod
@@ -304,7 +304,7 @@ class Trainer:
         if self.writes_run_folder:
             self._write_training_simtrace(it, simtrace)
             self.dr_metrics.add_training(episodes)
-        evaluation = self._evaluate(runner) if self._evaluation_due(it) else None
+        evaluation = self._evaluate(runner) if self._evaluation_due(it, elapsed) else None
         return IterationStats.of_iteration(it, elapsed, len(simtrace), episodes, losses, evaluation)
 
     def _write_outputs(self, stats: IterationStats) -> None:
@@ -335,10 +335,11 @@ class Trainer:
         if (it + 1) % self.settings.snapshot_every == 0:
             pool.add_snapshot(f"snapshot:{it}", self._graph(runner))
 
-    def _evaluation_due(self, it: int) -> bool:
-        """Every ``eval_every`` iterations and after an iteration budget's last (rank 0 only)."""
+    def _evaluation_due(self, it: int, elapsed: float) -> bool:
+        """Every ``eval_every`` iterations and after the one that spends the budget, of
+        iterations or of minutes (rank 0 only)."""
         every = (it + 1) % self.settings.eval_every == 0
-        return self.writes_run_folder and (every or self._last_iteration(it))
+        return self.writes_run_folder and (every or self._last_iteration(it, elapsed))
 
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
         """Race the greedy policy (race mode) and write the evaluation simtrace."""

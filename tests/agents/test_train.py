@@ -223,6 +223,14 @@ def test_iterations_report_typed_stats_and_evaluations_checkpoint(tmp_path):
     assert ckpt["iteration"] == 2 and ckpt["elapsed_s"] == seen[-1].elapsed_s
 
 
+def test_a_minutes_budget_ends_with_an_evaluation(tmp_path):
+    seen = []
+    settings = _settings(minutes=0.001, eval_every=1000)  # spent by the first iteration
+    Trainer(settings, tmp_path / "run", TINY).run(seen.append)
+    assert len(seen) == 1 and seen[-1].eval is not None
+    assert (tmp_path / "run" / "checkpoints" / "last.pt").exists()
+
+
 def test_ctrl_c_during_an_update_keeps_the_weights_it_started_from(tmp_path, monkeypatch):
     from agents.runner import RacingRunner
 
