@@ -28,7 +28,7 @@ from rich.table import Table
 
 from league.schemas import EventCreate
 
-SAMPLE_MODELS = ("sample-camera-a.zip", "sample-camera-b.zip")
+SAMPLE_MODELS = ("sample-time-trial.zip", "sample-self-play.zip")
 RACERS = ("alice", "bob")
 
 
