@@ -16,6 +16,7 @@ from rich.table import Table
 import arena
 from agents.deepracer_metrics import write_evaluation_metrics
 from agents.networks import observation_groups
+from agents.settings import TrainSettings
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.config import RaceConfig, resolve_track
 from arena.race import RaceResult, run_race
@@ -69,6 +70,23 @@ def evaluation_config(
         time_limit_s=time_limit_s,
     )
     return with_stack_size(config, stack_size)
+
+
+def run_evaluation_config(settings: TrainSettings, stack_size: int) -> RaceConfig:
+    """The evaluation race of a run's settings: its track and direction, race type, cars,
+    laps, seed and time limit, each car stacking ``stack_size`` frames."""
+    s = settings
+    return evaluation_config(
+        s.track,
+        s.race_type,
+        s.sensors,
+        s.action_space,
+        laps=s.eval_laps,
+        seed=s.seed,
+        time_limit_s=s.eval_time_limit,
+        stack_size=stack_size,
+        direction=s.direction,
+    )
 
 
 def with_stack_size(config: RaceConfig, stack_size: int) -> RaceConfig:

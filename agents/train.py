@@ -344,17 +344,7 @@ class Trainer:
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
         """Race the greedy policy (race mode) and write the evaluation simtrace."""
         s = self.settings
-        config = evaluate.evaluation_config(
-            s.track,
-            s.race_type,
-            s.sensors,
-            s.action_space,
-            laps=s.eval_laps,
-            seed=s.seed,
-            time_limit_s=s.eval_time_limit,
-            stack_size=self.hp.stack_size,
-            direction=s.direction,
-        )
+        config = evaluate.run_evaluation_config(s, self.hp.stack_size)
         policy = evaluate.TorchPolicy(runner.alg.get_policy(), s.discrete)
         reward = resolve_reward(s.reward_fn, s.race_type)
         race = evaluate.evaluate_policy(config, policy, reward_function=reward)

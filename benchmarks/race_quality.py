@@ -168,17 +168,7 @@ def final_evaluation(run_dir: Path, result: TrainResult) -> EvalSummary:
         assert summary is not None
         return summary
     actor, s = load_actor(run_dir)
-    config = evaluate.evaluation_config(
-        s.track,
-        s.race_type,
-        s.sensors,
-        s.action_space,
-        laps=s.eval_laps,
-        seed=s.seed,
-        time_limit_s=s.eval_time_limit,
-        stack_size=run_hyperparameters(run_dir).stack_size,
-        direction=s.direction,
-    )
+    config = evaluate.run_evaluation_config(s, run_hyperparameters(run_dir).stack_size)
     race = evaluate.evaluate_policy(config, evaluate.TorchPolicy(actor, s.discrete))
     return evaluate.summary(race)
 
