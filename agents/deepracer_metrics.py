@@ -22,14 +22,9 @@ import tempfile
 import time
 from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import yaml
-
-from arena.simtrace import lap_rows
-
-if TYPE_CHECKING:
-    from arena.race import RaceResult
 
 METRICS_VERSION = "2"
 TRAINING_METRICS = Path("metrics") / "TrainingMetrics.json"
@@ -54,13 +49,13 @@ def _ms(seconds: float) -> int:
     return int(round(seconds * 1000.0))
 
 
-def write_json_atomic(path: Path, data: Any) -> Path:
-    """Write ``data`` as JSON to ``path`` through a temporary file and ``os.replace``."""
+def write_text_atomic(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file and ``os.replace``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w") as handle:
-            json.dump(data, handle)
+            handle.write(text)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -68,11 +63,11 @@ def write_json_atomic(path: Path, data: Any) -> Path:
     return path
 
 
-def lap_metrics(result: RaceResult, car: str) -> list[dict[str, Any]]:
-    """Per lap of ``car`` (one entry per :func:`arena.simtrace.lap_rows` episode): the
+def lap_metrics(lap_rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per lap (one entry per episode of a car's :func:`arena.simtrace.lap_rows`): the
     simapp's ``EvalMetrics`` fields plus ``reward`` (the lap's summed reward)."""
     laps: dict[int, list[dict[str, Any]]] = {}
-    for row in lap_rows(result, car):
+    for row in lap_rows:
         laps.setdefault(row["episode"], []).append(row)
     out, start, trials = [], 0.0, 0
     for rows in laps.values():
@@ -100,17 +95,17 @@ def lap_metrics(result: RaceResult, car: str) -> list[dict[str, Any]]:
 
 
 def write_evaluation_metrics(
-    run_dir: str | Path, result: RaceResult, car: str | None = None, stamp: float | None = None
+    run_dir: str | Path, lap_rows: Iterable[dict[str, Any]], stamp: float | None = None
 ) -> Path:
-    """``RUN/metrics/EvaluationMetrics-<unix seconds>.json`` for a race's first car (or
-    ``car``); a second later if that name is taken."""
-    car = car or result.config.cars[0].name
-    laps = [{k: v for k, v in lap.items() if k != "reward"} for lap in lap_metrics(result, car)]
+    """``RUN/metrics/EvaluationMetrics-<unix seconds>.json`` of a car's evaluation (its
+    :func:`arena.simtrace.lap_rows`); a second later if that name is taken."""
+    laps = [{k: v for k, v in lap.items() if k != "reward"} for lap in lap_metrics(lap_rows)]
     second = int(time.time() if stamp is None else stamp)
     folder = Path(run_dir) / "metrics"
     while (folder / f"EvaluationMetrics-{second}.json").exists():
         second += 1
-    return write_json_atomic(folder / f"EvaluationMetrics-{second}.json", {"metrics": laps})
+    path = folder / f"EvaluationMetrics-{second}.json"
+    return write_text_atomic(path, json.dumps({"metrics": laps}))
 
 
 class TrainingMetricsLog:
@@ -140,11 +135,11 @@ class TrainingMetricsLog:
                 self._entry(e["reward"], start, end, "training", e["progress"], label)
             )
 
-    def add_evaluation(self, result: RaceResult, car: str | None = None) -> None:
-        """Each lap of an evaluation race, as the simapp's phase ``evaluation`` entries (the
-        episode and trial numbers of the last training episode)."""
-        car = car or result.config.cars[0].name
-        for lap in lap_metrics(result, car):
+    def add_evaluation(self, lap_rows: Iterable[dict[str, Any]]) -> None:
+        """Each lap of an evaluation (a car's :func:`arena.simtrace.lap_rows`), as the simapp's
+        phase ``evaluation`` entries (the episode and trial numbers of the last training
+        episode)."""
+        for lap in lap_metrics(lap_rows):
             start, end = lap["start_time"] / 1000.0, lap["metric_time"] / 1000.0
             progress, label = lap["completion_percentage"], lap["episode_status"]
             self.metrics.append(
@@ -173,7 +168,7 @@ class TrainingMetricsLog:
             "version": METRICS_VERSION,
             "best_model_metric": "progress",
         }
-        return write_json_atomic(self.path, body)
+        return write_text_atomic(self.path, json.dumps(body))
 
 
 def write_training_params(
@@ -187,9 +182,5 @@ def write_training_params(
         "RACE_TYPE": race_type.upper(),
         "REVERSE_DIR": str(reversed_direction).lower(),
     }
-    path = Path(run_dir) / "training_params.yaml"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(yaml.safe_dump(params, explicit_start=True, default_flow_style=False))
-    os.replace(tmp, path)
-    return path
+    text = yaml.safe_dump(params, explicit_start=True, default_flow_style=False)
+    return write_text_atomic(Path(run_dir) / "training_params.yaml", text)

@@ -14,7 +14,7 @@ import torch
 from rich.table import Table
 
 import arena
-from agents.deepracer_metrics import write_evaluation_metrics
+from agents.deepracer_metrics import TrainingMetricsLog, write_evaluation_metrics
 from agents.networks import observation_groups
 from agents.settings import TrainSettings
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
@@ -135,16 +135,21 @@ def evaluation_dir(run_dir: Path) -> Path:
 
 
 def write_evaluation(
-    run_dir: Path, result: RaceResult, folder: Path | None = None, metrics: bool = True
+    run_dir: Path,
+    result: RaceResult,
+    folder: Path | None = None,
+    training_log: TrainingMetricsLog | None = None,
 ) -> Path:
     """Write the evaluation simtrace (first car; one episode per lap, as DeepRacer) in
-    deepracer-for-cloud's layout, and with ``metrics`` its ``EvaluationMetrics`` file."""
+    deepracer-for-cloud's layout, and its laps to an ``EvaluationMetrics`` file, or for a
+    periodic evaluation during training to ``training_log`` (as deepracer-for-cloud does)."""
     folder = folder or evaluation_dir(run_dir)
-    car = result.config.cars[0].name
-    rows = lap_rows(result, car, wall_clock=time.time())
+    rows = lap_rows(result, result.config.cars[0].name, wall_clock=time.time())
     write_simtrace(folder / "evaluation-simtrace" / "0-iteration.csv", rows)
-    if metrics:
-        write_evaluation_metrics(run_dir, result, car)
+    if training_log is None:
+        write_evaluation_metrics(run_dir, rows)
+    else:
+        training_log.add_evaluation(rows)
     return folder
 
 

@@ -349,8 +349,7 @@ class Trainer:
         reward = resolve_reward(s.reward_fn, s.race_type)
         race = evaluate.evaluate_policy(config, policy, reward_function=reward)
         runner.alg.train_mode()
-        evaluate.write_evaluation(self.run_dir, race, metrics=False)
-        self.dr_metrics.add_evaluation(race)
+        evaluate.write_evaluation(self.run_dir, race, training_log=self.dr_metrics)
         return evaluate.summary(race)
 
     def _record(self, result: TrainResult, stats: IterationStats) -> None:
