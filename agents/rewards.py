@@ -12,7 +12,6 @@ import copy
 import inspect
 import math
 import os
-import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from arena.config import RACE_TYPES, PhysicsConfig
-from arena.params import ObjectsView, build_params
+from arena.params import ObjectsView, build_params, deepest_line
 from tracks.catalog import get_track
 from tracks.track import Track
 
@@ -36,8 +35,8 @@ class RewardFunctionError(ValueError):
 
 def _where_in(path: Path, exc: BaseException) -> str:
     """``line N`` of the deepest traceback frame inside the racer's file, if any."""
-    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == str(path)]
-    return f" at line {frames[-1].lineno}" if frames else ""
+    line = deepest_line(exc, str(path))
+    return f" at line {line}" if line else ""
 
 
 def _execute(path: Path) -> dict[str, Any]:

@@ -16,7 +16,6 @@ import signal
 import threading
 import time
 import traceback
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,31 +29,12 @@ from agents.rewards import resolve_reward
 from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
 from arena.env import RacingEnv
+from arena.params import RewardRaised
 from arena.simtrace import simtrace_row, step_facts
 
 
 class RaceStepError(RuntimeError):
     """A race failed to step; the message names the race, car, step and the cause."""
-
-
-def _naming_failures(fn: Callable[[dict], Any], car: str) -> Callable[[dict], Any]:
-    """``fn`` whose exceptions become a :class:`RaceStepError` naming the car, the step,
-    the exception and the line of ``fn``'s file it came from (else the deepest line)."""
-    source = getattr(getattr(fn, "__code__", None), "co_filename", None)
-
-    def reward(params: dict) -> Any:
-        try:
-            return fn(params)
-        except Exception as exc:
-            frames = traceback.extract_tb(exc.__traceback__)
-            frame = next((f for f in reversed(frames) if f.filename == source), frames[-1])
-            where = f"{frame.filename}, line {frame.lineno}"
-            raise RaceStepError(
-                f"reward function of car {car!r} raised at step {params.get('steps')} "
-                f"({where}): {type(exc).__name__}: {exc}"
-            ) from exc
-
-    return reward
 
 
 @dataclass
@@ -102,9 +82,8 @@ class EnvGroup:
     ) -> None:
         config = RaceConfig.from_json(config_json)
         reward_fn = resolve_reward(reward, config.race_type)
-        rewards = {car.name: _naming_failures(reward_fn, car.name) for car in config.cars}
         self.envs = [
-            RacingEnv(config.model_copy(update={"seed": s}), reward_functions=rewards)
+            RacingEnv(config.model_copy(update={"seed": s}), reward_functions=reward_fn)
             for s in seeds
         ]
         self.learners = set(learner_cars)
@@ -152,7 +131,7 @@ class EnvGroup:
             commands = {car: self._action(i, car, actions, slot_of) for car in env.agents}
             try:
                 obs, rew, term, trunc, infos = env.step(commands)
-            except RaceStepError as exc:  # the user's reward function raised
+            except RewardRaised as exc:  # the user's reward function raised
                 raise RaceStepError(f"race {i}: {exc}") from exc.__cause__
             except Exception as exc:  # e.g. the arena's check of a reward's value
                 raise RaceStepError(f"race {i}: {type(exc).__name__}: {exc}") from exc

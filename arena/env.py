@@ -34,7 +34,7 @@ from arena.lidar import (
     lidar_reach,
     sector_lidar,
 )
-from arena.params import ObjectsView, build_params, check_reward, params_copy
+from arena.params import ObjectsView, build_params, call_reward
 from arena.rewards import follow_center_line
 from arena.rules import REJOIN_S, CarRecord, ContactParty, EpisodeStatus, Measurement, RuleBook
 from arena.sensors_spec import IMAGE_SENSORS, observation_space
@@ -363,10 +363,7 @@ class RacingEnv(ParallelEnv):
         for agent in self.agents:
             live = self._cars[agent]
             params = verdicts[agent].params
-            fn = self._rewards[agent]
-            # Like DeepRacer, the reward function gets its own copy: its edits stay its own.
-            reward = fn(params_copy(params))
-            rewards[agent] = check_reward(reward, agent, live.record.steps, params)
+            rewards[agent] = call_reward(self._rewards[agent], agent, live.record.steps, params)
             terminations[agent] = live.record.done and not live.record.truncated
             truncations[agent] = live.record.truncated
             infos[agent] = self._info(agent, params, verdicts[agent].contacts)

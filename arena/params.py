@@ -10,7 +10,8 @@ a deep copy, every dict built here and every :func:`params_copy` has its own lis
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import traceback
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -197,6 +198,39 @@ def build_params(
         params["closest_objects"] = nearest
         params["object_in_camera"] = object_in_camera(x, y, yaw, objects.location[nearest[1]])
     return params
+
+
+class RewardRaised(RuntimeError):
+    """A reward function raised; the message names the car, the step, the line and the cause
+    (which is also the exception's ``__cause__``)."""
+
+
+def deepest_line(exc: BaseException, filename: str) -> int | None:
+    """The line of the deepest traceback frame of ``exc`` in ``filename``, if any."""
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == filename]
+    return frames[-1].lineno if frames else None
+
+
+def call_reward(
+    fn: Callable[[dict[str, Any]], Any], car: str, step: int, params: dict[str, Any]
+) -> float:
+    """``fn`` on its own copy of ``params`` (as DeepRacer), checked by :func:`check_reward`.
+
+    An exception it raises becomes a :class:`RewardRaised` naming the car, the step and the
+    line of ``fn``'s file it came from (else the deepest line).
+    """
+    try:
+        value = fn(params_copy(params))
+    except Exception as exc:
+        source = getattr(getattr(fn, "__code__", None), "co_filename", "")
+        line = deepest_line(exc, source)
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        where = f"{source}, line {line}" if line else f"{frame.filename}, line {frame.lineno}"
+        raise RewardRaised(
+            f"reward function of car {car!r} raised at step {step} ({where}): "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
+    return check_reward(value, car, step, params)
 
 
 def check_reward(value: Any, car: str, step: int, params: dict[str, Any]) -> float:
