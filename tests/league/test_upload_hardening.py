@@ -105,7 +105,7 @@ def test_hidden_matmul_chain_hits_the_childs_cpu_limit(tmp_path: Path) -> None:
             return await validator.validate(data)
 
     start = time.monotonic()
-    report = asyncio.run(judge(matmul_chain(20, hidden=True)))
+    report = asyncio.run(judge(matmul_chain(200, hidden=True)))
     (problem,) = report.problems
     assert "too much CPU" in problem.message and "2 s of CPU time" in problem.expected
     assert time.monotonic() - start < 10
