@@ -23,6 +23,7 @@ METRICS_COLUMNS = (
     "eval_best_lap",
     "eval_total_time",
     "eval_off_track",
+    "eval_crashes",
     "value_loss",
     "surrogate_loss",
     "entropy",
@@ -99,15 +100,29 @@ def _evaluation_cells(evaluation: EvalSummary | None) -> dict[str, Any]:
         "eval_best_lap": evaluation.best_lap,
         "eval_total_time": evaluation.total_time,
         "eval_off_track": evaluation.off_track,
+        "eval_crashes": evaluation.crashes,
     }
 
 
 def append_metrics(path: str | Path, stats: IterationStats) -> None:
-    """Append ``stats`` to ``RUN/metrics.csv`` (the header first when the file is new)."""
+    """Append ``stats`` to ``RUN/metrics.csv`` (the header first when the file is new).
+
+    A file begun by an older version keeps its own columns: a resumed run's rows stay
+    under the right headers, and columns the file lacks are left out.
+    """
     path = Path(path)
-    new = not path.exists()
+    columns = _header(path) or METRICS_COLUMNS
     with path.open("a", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=METRICS_COLUMNS)
-        if new:
+        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction="ignore")
+        if handle.tell() == 0:
             writer.writeheader()
         writer.writerow(metrics_row(stats))
+
+
+def _header(path: Path) -> tuple[str, ...] | None:
+    """The column names of an existing, non-empty ``metrics.csv`` (else None)."""
+    if not path.is_file():
+        return None
+    with path.open(newline="") as handle:
+        header = next(csv.reader(handle), None)
+    return tuple(header) if header else None

@@ -20,8 +20,8 @@ EVAL = EvalSummary(
     best_lap=None,
     total_time=None,
     off_track=2,
-    crashes=0,
-    resets=2,
+    crashes=1,
+    resets=3,
     status="time_up",
 )
 
@@ -46,6 +46,7 @@ def test_row_without_evaluation_leaves_its_cells_empty():
 def test_row_with_evaluation_leaves_only_absent_values_empty():
     row = metrics_row(IterationStats.of_iteration(4, 20.0, 500, EPISODES, LOSSES, EVAL))
     assert (row["eval_progress"], row["eval_laps"], row["eval_off_track"]) == (55.0, 1, 2)
+    assert row["eval_crashes"] == EVAL.crashes
     assert row["eval_best_lap"] == "" and row["eval_total_time"] == ""
 
 
@@ -58,3 +59,15 @@ def test_append_writes_the_header_once(tmp_path):
     assert [int(r["iteration"]) for r in rows] == [0, 1, 2]
     assert tuple(rows[0]) == METRICS_COLUMNS
     assert float(rows[2]["mean_reward"]) == pytest.approx(20.0)
+
+
+def test_append_to_a_file_with_older_columns_keeps_its_header(tmp_path):
+    """A run begun before a column existed is resumed under its own header."""
+    path = tmp_path / "metrics.csv"
+    older = [c for c in METRICS_COLUMNS if c != "eval_crashes"]
+    path.write_text(",".join(older) + "\n")
+    append_metrics(path, IterationStats.of_iteration(0, 1.0, 9, EPISODES, LOSSES, EVAL))
+    with path.open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert tuple(rows[0]) == tuple(older)
+    assert rows[0]["eval_off_track"] == str(EVAL.off_track)
