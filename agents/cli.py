@@ -8,6 +8,7 @@ description as its help and, where the command line takes the same form, its def
 from __future__ import annotations
 
 import os
+import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -194,6 +195,13 @@ def evaluate_command(
     race_type: Annotated[str | None, typer.Option(help="Race type (default: the run's).")] = None,
     seed: Annotated[int, typer.Option(help="Race seed.")] = 0,
     time_limit: Annotated[float, typer.Option(help="Simulated seconds before time-up.")] = 180.0,
+    opponent: Annotated[
+        Path | None,
+        typer.Option(
+            help="model.zip or .onnx driving the other cars, with the run's sensors and "
+            "actions (default: a head-to-model run's first --opponent, else the run itself)."
+        ),
+    ] = None,
 ) -> None:
     """Race a trained run, print the results table and write a replay GIF."""
     from agents import evaluate
@@ -204,10 +212,19 @@ def evaluate_command(
         stack_size = run_hyperparameters(run).stack_size
     except (FileNotFoundError, ValueError) as exc:
         _fail(f"cannot load {run}: {exc}")
+    raced = settings.model_copy(update={"race_type": race_type or settings.race_type})
+    try:
+        others = (
+            evaluate.model_opponent(opponent, settings)
+            if opponent is not None
+            else evaluate.run_opponent(raced)
+        )
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile) as exc:
+        _fail(f"cannot load the opponent: {exc}")
     try:
         config = evaluate.evaluation_config(
             track or settings.track,
-            race_type or settings.race_type,
+            raced.race_type,
             settings.sensors,
             settings.action_space,
             laps=laps,
@@ -221,7 +238,10 @@ def evaluate_command(
         _fail(str(exc))
     folder = evaluate.evaluation_dir(run)
     race = evaluate.evaluate_policy(
-        config, evaluate.TorchPolicy(actor, settings.discrete), folder / "replay.gif"
+        config,
+        evaluate.TorchPolicy(actor, settings.discrete),
+        folder / "replay.gif",
+        opponent=others,
     )
     evaluate.write_evaluation(run, race, folder)
     console.print(evaluate.results_table(race))

@@ -89,6 +89,29 @@ def run_evaluation_config(settings: TrainSettings, stack_size: int) -> RaceConfi
     )
 
 
+def model_opponent(path: str | Path, settings: TrainSettings) -> Any:
+    """A trained model (``model.zip`` or ``.onnx``) that drives the other cars of a run's
+    evaluation greedily; it must read the run's sensors and act in its kind of space."""
+    from agents.selfplay import opponent_policy, read_policy_graph
+
+    runner = opponent_policy(read_policy_graph(path), settings.discrete, name=Path(path).name)
+    unknown = sorted(set(runner.input_names) - set(settings.sensors))
+    if unknown:
+        raise ValueError(
+            f"{path} reads {', '.join(unknown)}, which this run's cars do not have "
+            f"(sensors: {', '.join(settings.sensors)})"
+        )
+    return runner
+
+
+def run_opponent(settings: TrainSettings) -> Any | None:
+    """The opponent a run's evaluations race: a head-to-model run's first ``--opponent``
+    (the parent it learns to beat), else None (the policy races itself)."""
+    if settings.race_type != "head_to_model" or not settings.opponent:
+        return None
+    return model_opponent(settings.opponent[0], settings)
+
+
 def with_stack_size(config: RaceConfig, stack_size: int) -> RaceConfig:
     """``config`` with every car's observations stacking ``stack_size`` frames."""
     if all(car.stack_size == stack_size for car in config.cars):
@@ -102,15 +125,21 @@ def evaluate_policy(
     policy: Any,
     replay_path: Path | None = None,
     reward_function: Callable[[dict[str, Any]], float] | None = None,
+    opponent: Any | None = None,
 ) -> RaceResult:
-    """Race ``policy`` in every car of ``config``; optionally write a replay GIF.
+    """Race ``policy`` in the first car of ``config`` and ``opponent`` (default: ``policy``
+    itself) in every other car; optionally write a replay GIF.
 
     ``reward_function`` only fills the trace's reward column (default: follow the centre).
     """
     from arena.replay import ReplayWriter
 
     writer = ReplayWriter(resolve_track(config)[0]) if replay_path is not None else None
-    policies = {car.name: policy for car in config.cars}
+    first = config.cars[0].name
+    policies = {
+        car.name: policy if car.name == first or opponent is None else opponent
+        for car in config.cars
+    }
     result = run_race(
         config,
         policies,

@@ -102,6 +102,11 @@ class Trainer:
         self.hp = hyperparameters or (run_hyperparameters(run_dir) if resume else Hyperparameters())
         self.clone = Path(clone) if clone else None
         self.resume = resume
+        if not resume and holds_run(self.run_dir):
+            raise ValueError(
+                f"{self.run_dir} already holds a training run: continue it with --resume, "
+                "or give another --out"
+            )
         self.dr_metrics = TrainingMetricsLog(self.run_dir, resume=resume)
         networks.check_preset(settings.preset, settings.sensors)
         get_track(settings.track)  # raises TrackNotFoundError (a ValueError)
@@ -115,6 +120,7 @@ class Trainer:
         self.start_iteration = 0
         self.elapsed_before = 0.0
         self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
+        self.eval_opponent = evaluate.run_opponent(settings) if self.writes_run_folder else None
 
     # ------------------------------------------------------------------ setup
     def _write_run_files(self) -> None:
@@ -342,12 +348,15 @@ class Trainer:
         return self.writes_run_folder and (every or self._last_iteration(it, elapsed))
 
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
-        """Race the greedy policy (race mode) and write the evaluation simtrace."""
+        """Race the greedy policy (race mode; head to model: against the run's first
+        ``--opponent``) and write the evaluation simtrace."""
         s = self.settings
         config = evaluate.run_evaluation_config(s, self.hp.stack_size)
         policy = evaluate.TorchPolicy(runner.alg.get_policy(), s.discrete)
         reward = resolve_reward(s.reward_fn, s.race_type)
-        race = evaluate.evaluate_policy(config, policy, reward_function=reward)
+        race = evaluate.evaluate_policy(
+            config, policy, reward_function=reward, opponent=self.eval_opponent
+        )
         runner.alg.train_mode()
         evaluate.write_evaluation(self.run_dir, race, training_log=self.dr_metrics)
         return evaluate.summary(race)
@@ -422,6 +431,11 @@ def pack_run(run_dir: str | Path, out: str | Path, summary: dict[str, Any] | Non
         metrics_csv=metrics if metrics.is_file() else None,
         stack_size=stack_size,
     )
+
+
+def holds_run(run_dir: Path) -> bool:
+    """Whether ``run_dir`` already holds a run's metrics or checkpoint."""
+    return (run_dir / "metrics.csv").exists() or checkpoint_path(run_dir).exists()
 
 
 def run_hyperparameters(run_dir: str | Path) -> Hyperparameters:

@@ -75,6 +75,11 @@ class OnnxRunner:
         self._dtypes = {s.name: np.dtype(s.dtype) for s in inputs}
         self._shapes = {s.name: s.shape for s in inputs}
 
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """The sensors the graph reads."""
+        return tuple(self._dtypes)
+
     @classmethod
     def from_graph(
         cls, graph: bytes, discrete: bool, *, non_finite: NonFiniteRule, name: str = "policy"

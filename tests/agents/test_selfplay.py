@@ -1,12 +1,17 @@
-"""Self-play opponents run on the submissions runner, zeroing non-finite outputs."""
+"""Self-play opponents: run on the submissions runner (non-finite outputs zeroed), raced
+in a head-to-model run's evaluations."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
+from agents.action_spaces import parse_action_space_spec
+from agents.evaluate import evaluate_policy, evaluation_config, run_opponent
 from agents.selfplay import opponent_policy
+from agents.settings import TrainSettings
 from submissions import OnnxRunner
 from tests.submissions.test_runner import identity
 
@@ -21,3 +26,42 @@ def test_opponents_drive_greedily_and_zero_non_finite_outputs() -> None:
     assert action.dtype == np.float32
     np.testing.assert_array_equal(action, [0.0, -1.0])
 
+
+class _Throttle:
+    """Drives straight at a fixed throttle in ``[-1, 1]`` (continuous actions)."""
+
+    def __init__(self, throttle: float) -> None:
+        self.action = np.array([0.0, throttle], np.float32)
+
+    def reset(self) -> None:
+        """Stateless."""
+
+    def act(self, observation):
+        return self.action
+
+
+def test_evaluation_races_the_opponent_in_the_other_cars() -> None:
+    """A head-to-model evaluation drives the opponent, not the policy, in car1."""
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    config = evaluation_config(
+        "beginner_loop", "head_to_model", ("lidar",), space, laps=1, time_limit_s=1.5
+    )
+    fast, slow = _Throttle(1.0), _Throttle(-1.0)
+    raced = evaluate_policy(config, fast, opponent=slow)
+    assert raced.car("car0").distance > 1.5 * raced.car("car1").distance
+    alone = evaluate_policy(config, fast)  # no opponent: the policy races itself
+    assert alone.car("car1").distance > 1.5 * raced.car("car1").distance
+
+
+def test_a_head_to_model_run_evaluates_against_its_first_opponent(tmp_path) -> None:
+    parent = tmp_path / "parent.onnx"
+    parent.write_bytes(identity(2))
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    run = TrainSettings(
+        race_type="head_to_model", sensors=("lidar",), action_space=space, opponent=(str(parent),)
+    )
+    assert isinstance(run_opponent(run), OnnxRunner)
+    assert run_opponent(run.model_copy(update={"race_type": "time_trial"})) is None
+    camera = run.model_copy(update={"sensors": ("camera",)})
+    with pytest.raises(ValueError, match="reads lidar, which this run's cars do not have"):
+        run_opponent(camera)

@@ -167,6 +167,10 @@ def test_cli_train_writes_every_output(tmp_path):
     ckpt = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
     assert ckpt["iteration"] == 2
 
+    again = cli.invoke(app, args)  # a fresh run into the same folder is refused, not appended
+    assert again.exit_code == 2 and "already holds a training run" in again.output
+    assert len((run / "metrics.csv").read_text().splitlines()) == 4
+
     shown = cli.invoke(app, ["evaluate", str(run), "--laps", "1", "--time-limit", "10"])
     assert shown.exit_code == 0, shown.output
     assert "off" in shown.output and list(run.glob("evaluation-*/replay.gif"))
