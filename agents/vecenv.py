@@ -32,6 +32,10 @@ from arena.env import RacingEnv
 from arena.params import RewardRaised
 from arena.simtrace import simtrace_row, step_facts
 
+# Head to model: how far behind a rival a restarted learner starts (and ahead of a learner
+# a restarted opponent starts), metres along the track, in the other lane.
+PASS_GAP_M = 1.0
+
 
 class RaceStepError(RuntimeError):
     """A race failed to step; the message names the race, car, step and the cause."""
@@ -152,12 +156,24 @@ class EnvGroup:
                     if term[car] or trunc[car]:
                         episodes.append(self._episode_stats(i, car, slot, infos[car]))
                 if term[car] or trunc[car]:
-                    first, info = env.restart_car(car)
+                    first, info = env.restart_car(car, self._restart_near(env, car))
                     self.last_obs[(i, car)] = first
                     self.last_info[(i, car)] = info
                     if k is not None:
                         self.slots[k].start = env.time
         return StepBatch(self._stack_obs(), rewards, terminated, truncated, episodes)
+
+    def _restart_near(self, env: RacingEnv, car: str) -> tuple[str, float] | None:
+        """Where a head-to-model race restarts ``car`` (``RacingEnv.restart_car``'s
+        ``near``): a learner :data:`PASS_GAP_M` behind a racing rival, an opponent as far
+        ahead of a racing learner, so that learners practise passing. Else None."""
+        if env.config.race_type != "head_to_model":
+            return None
+        learner = car in self.learners
+        rivals = [c for c in env.agents if c != car and (learner or c in self.learners)]
+        if not rivals:
+            return None
+        return (rivals[0], -PASS_GAP_M if learner else PASS_GAP_M)
 
     def _action(
         self, i: int, car: str, actions: np.ndarray, slot_of: dict[tuple[int, str], int]

@@ -46,12 +46,14 @@ from arena.spawn import (
     car_grid,
     grid_slots,
     is_clear,
+    nearest_lane,
     obstacle_places,
     other_lane,
     rectangle,
     respawn_place,
     start_arc,
 )
+from arena.spawn import place as place_at
 from tracks.track import Projection, Track
 
 RewardFunction = Callable[[dict[str, Any]], float]
@@ -566,11 +568,16 @@ class RacingEnv(ParallelEnv):
             live.parked = True
             self._forget_poses()
 
-    def restart_car(self, agent: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    def restart_car(
+        self, agent: str, near: tuple[str, float] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Start a new training episode for one car whose episode ended, others racing on.
 
-        The car comes back on the centre line at the next training start point (5% further
-        along each time) and rejoins ``agents``. Training only: races are never restarted.
+        The car comes back at the next training start point (5% further along each time;
+        on the centre line, or on the front slot's lane when several cars race) and rejoins
+        ``agents``. ``near=(car, gap_m)`` starts it instead ``gap_m`` metres along the track
+        from that racing car (negative: behind it), in the other lane: a learner restarted
+        behind its opponent has to pass it. Training only: races are never restarted.
         Returns the car's first observation and info.
         """
         if self.config.mode != "training":
@@ -579,8 +586,13 @@ class RacingEnv(ParallelEnv):
         if agent in self.agents:
             raise RuntimeError(f"car {agent!r} is still racing")
         self._car_episodes[agent] += 1
-        arc = start_arc(self.config, self.track, self._episode + self._car_episodes[agent])
-        place = grid_slots(len(self.config.cars), self.track, arc)[0]
+        if near is not None and near[0] in self.agents:
+            place = self._beside(near[0], near[1])
+        else:
+            arc = start_arc(self.config, self.track, self._episode + self._car_episodes[agent])
+            if not self.agents:
+                self._redraw_obstacles(arc)
+            place = grid_slots(len(self.config.cars), self.track, arc)[0]
         live.car.teleport(place.x, place.y, place.yaw)
         live.last_point = live.car.model_point()
         live.record = self._rules.start(self._arc_of(live.last_point), self.time)
@@ -590,6 +602,27 @@ class RacingEnv(ParallelEnv):
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
         observation = self._observe([agent], fresh=True)[agent]
         return observation, self._info(agent, self._initial_params(agent))
+
+    def _beside(self, other: str, gap_m: float) -> Placement:
+        """The pose ``gap_m`` metres along the track from car ``other``'s origin (the point
+        teleport places), in the lane its model point is not in, facing the driving way."""
+        snap = self._snap(self._cars[other].car)
+        proj = self.track.project(np.array([[snap.state.x, snap.state.y], snap.model_point]))
+        arc = float(proj.arc_length[0]) + gap_m
+        lane = other_lane(nearest_lane(self.track, arc, float(proj.offset[1])))
+        return place_at(self.track, arc, lane)
+
+    def _redraw_obstacles(self, arc0: float) -> None:
+        """Random boxes move to a new random layout ahead of ``arc0`` (a lone training car's
+        next start), so that a policy learns to see boxes, not where they stood; boxes at
+        configured ``positions`` stay where they are."""
+        boxes = self.config.obstacles
+        if boxes is None or boxes.positions is not None:
+            return
+        places = obstacle_places(boxes, self.track, arc0, self.rng)
+        for obstacle, (place, lane) in zip(self._obstacles, places, strict=True):
+            world.move_box(self._client, obstacle.body, place.x, place.y, place.yaw, boxes.size[2])
+            obstacle.place, obstacle.lane = place, lane
 
     # ------------------------------------------------------------ observations
     def _snap(self, car: Car) -> CarSnapshot:

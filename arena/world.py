@@ -96,6 +96,12 @@ def add_box(
     return body
 
 
+def move_box(client: int, body: int, x: float, y: float, yaw: float, height: float) -> None:
+    """Stand a box made by :func:`add_box` (``height`` tall) at ``(x, y)`` facing ``yaw``."""
+    quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
+    p.resetBasePositionAndOrientation(body, [x, y, height / 2.0], quat, physicsClientId=client)
+
+
 def contact_pairs(
     client: int, bodies: Sequence[int], margin: float = 0.005
 ) -> set[tuple[int, int]]:

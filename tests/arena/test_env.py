@@ -266,6 +266,49 @@ def test_training_restart_car_starts_a_new_episode_for_one_car() -> None:
     env.close()
 
 
+def test_a_car_restarted_near_a_rival_starts_behind_it_in_the_other_lane() -> None:
+    env = arena.parallel_env(race_type="head_to_model", num_cars=2, mode="training")
+    _, infos = env.reset(seed=0)
+    driver = LaneFollowerPolicy(env.track, env.config.cars[1].action_space, speed=0.8)
+    while "car0" in env.agents:
+        _, _, _, _, step_infos = env.step(
+            {"car0": 1, "car1": driver.act({}, params=infos["car1"]["params"])}
+        )  # car0 turns off the track at full lock
+        infos.update(step_infos)
+    _, info = env.restart_car("car0", near=("car1", -1.0))
+    me, rival = info["params"], infos["car1"]["params"]
+    behind = (rival["projection_distance"] - me["projection_distance"]) % me["track_length"]
+    assert behind == pytest.approx(1.0, abs=0.1)
+    assert me["is_left_of_center"] != rival["is_left_of_center"]
+    assert me["all_wheels_on_track"] and info["episode_status"] == "prepare"
+    env.close()
+
+
+def test_a_lone_training_car_meets_a_new_box_layout_each_episode() -> None:
+    """Random boxes are redrawn ahead of each new start, in the physics as in the params."""
+    import pybullet as p
+
+    from arena.spawn import START_CLEAR_M
+
+    env = arena.parallel_env(race_type="object_avoidance", mode="training", seed=3)
+    _, infos = env.reset()
+    layouts = [infos["car0"]["params"]["objects_location"]]
+    for _ in range(3):
+        while "car0" in env.agents:
+            env.step({"car0": 1})  # full lock: off the road within a few metres
+        _, info = env.restart_car("car0")
+        params = info["params"]
+        layouts.append(params["objects_location"])
+        ahead = [(d - params["projection_distance"]) % params["track_length"]
+                 for d in params["objects_distance"]]  # fmt: skip
+        assert min(ahead) >= START_CLEAR_M - 0.3  # the new start is clear
+        for box, location in zip(env._obstacles, params["objects_location"], strict=True):
+            position, _ = p.getBasePositionAndOrientation(box.body, physicsClientId=env._client)
+            assert position[:2] == pytest.approx(location, abs=1e-6)  # what the car can hit
+    assert len({tuple(map(tuple, layout)) for layout in layouts}) == len(layouts)
+    env.close()
+
+
 def test_sensors_see_the_car_ahead() -> None:
     env = arena.parallel_env(
         race_type="head_to_model", num_cars=2, sensors=["camera", "lidar"], variation=NO_VARIATION
