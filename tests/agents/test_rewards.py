@@ -97,6 +97,8 @@ def test_samples_prefer_what_they_document() -> None:
     assert avoid({**boxes, "is_left_of_center": not box_lane}) > avoid(
         {**boxes, "is_left_of_center": box_lane}
     )
+    passing = {**boxes, "is_left_of_center": not box_lane}
+    assert avoid({**passing, "speed": 3.0}) > avoid({**passing, "speed": 1.0})  # racing pays
     cars = sample_params("head_to_model")
     h2h = load_sample("head_to_head", "head_to_model")
     assert h2h({**cars, "is_crashed": True}) < h2h(cars)
