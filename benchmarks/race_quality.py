@@ -58,6 +58,9 @@ class Recipe:
     track: str = "beginner_loop"
     network: str | None = None  # None: the preset by sensors (camera: CPU CNN)
     workers: int = 2
+    # Simulated seconds an evaluation may run: 3 laps of a car worth measuring take well
+    # under this, and a car stuck behind a box does not cost minutes of training time.
+    eval_time_limit: float = 60.0
     # DeepRacer's defaults (agents.hyperparameters); a field here overrides one.
     hyperparameters: dict[str, Any] = field(default_factory=dict)
     # head_to_model only: clone this recipe's run and race against its model.zip.
@@ -73,10 +76,11 @@ RECIPES: dict[str, Recipe] = {
         reward_fn="pursuit",
     ),
     "object_avoidance": Recipe(
-        race_type="object_avoidance",  # arena.make_config's default obstacles section
-        sensors=("camera",),
-        action_space="continuous:-30:30:0.5:3",
+        race_type="object_avoidance",  # arena.make_config's default section: 6 random boxes
+        sensors=("camera", "lidar"),  # the lidar sees boxes (and cars), never the road
+        action_space="continuous:-30:30:0.5:4",
         reward_fn="object_avoidance",
+        track="slipstream_speedway",  # beginner_loop's 0.76 m leaves a box 0.3 m to pass
     ),
     "head_to_bot": Recipe(
         race_type="head_to_bot",  # arena.make_config's default bots section
@@ -111,6 +115,7 @@ def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None)
         workers=workers,
         minutes=args.minutes,
         eval_every=args.eval_every,
+        eval_time_limit=recipe.eval_time_limit,
         stop_on_clean_eval=False,
         selfplay=recipe.selfplay,
         opponent=(str(opponent),) if opponent else (),
