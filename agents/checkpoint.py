@@ -1,21 +1,31 @@
-"""``RUN/checkpoints/last.pt``: state dicts, the iteration they finished and the training time.
+"""``RUN/checkpoints/``: state dicts, the iteration they finished and the training time.
 
-The file holds plain tensors and numbers only (``actor_state_dict``, ``critic_state_dict``,
-``optimizer_state_dict``, ``iteration``, ``elapsed_s``), so it loads with
-``torch.load(path, weights_only=True)``.
+``last.pt`` is where training stands (``--resume`` continues it); ``best.pt`` holds the
+weights of the run's best evaluation, with its ``eval_score``, as DeepRacer keeps a best
+checkpoint beside the last: a run's model (``model.zip``, ``evaluate``, ``--clone``) is
+``best.pt`` when there is one. The files hold plain tensors and numbers only
+(``actor_state_dict``, ``critic_state_dict``, ``optimizer_state_dict``, ``iteration``,
+``elapsed_s``), so they load with ``torch.load(path, weights_only=True)``.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import torch
 
+Which = Literal["last", "best"]
 
-def checkpoint_path(run_dir: str | Path) -> Path:
-    """Where a run keeps its checkpoint."""
-    return Path(run_dir) / "checkpoints" / "last.pt"
+
+def checkpoint_path(run_dir: str | Path, which: Which = "last") -> Path:
+    """Where a run keeps its last (or best) checkpoint."""
+    return Path(run_dir) / "checkpoints" / f"{which}.pt"
+
+
+def model_checkpoint(run_dir: str | Path) -> Which:
+    """The checkpoint holding a run's model: ``best`` when it has one, else ``last``."""
+    return "best" if checkpoint_path(run_dir, "best").exists() else "last"
 
 
 def checkpoint(algorithm_state: dict[str, Any], iteration: int, elapsed_s: float) -> dict[str, Any]:
@@ -23,15 +33,17 @@ def checkpoint(algorithm_state: dict[str, Any], iteration: int, elapsed_s: float
     return {**algorithm_state, "iteration": iteration, "elapsed_s": elapsed_s}
 
 
-def write_checkpoint(run_dir: str | Path, content: dict[str, Any]) -> Path:
-    """Write the checkpoint (through a temporary file, so a crash leaves the old one whole)."""
-    path = checkpoint_path(run_dir)
+def write_checkpoint(run_dir: str | Path, content: dict[str, Any], which: Which = "last") -> Path:
+    """Write a checkpoint (through a temporary file, so a crash leaves the old one whole)."""
+    path = checkpoint_path(run_dir, which)
     path.parent.mkdir(parents=True, exist_ok=True)
     torch.save(content, path.with_suffix(".tmp"))
     path.with_suffix(".tmp").replace(path)
     return path
 
 
-def read_checkpoint(run_dir: str | Path, device: str | torch.device = "cpu") -> dict[str, Any]:
-    """A run's checkpoint, its tensors on ``device``."""
-    return torch.load(checkpoint_path(run_dir), weights_only=True, map_location=device)
+def read_checkpoint(
+    run_dir: str | Path, device: str | torch.device = "cpu", which: Which = "last"
+) -> dict[str, Any]:
+    """A run's last (or best) checkpoint, its tensors on ``device``."""
+    return torch.load(checkpoint_path(run_dir, which), weights_only=True, map_location=device)

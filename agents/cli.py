@@ -123,7 +123,7 @@ def train(
     device: Annotated[str, _setting("device")] = _default("device"),
     threads: Annotated[int, _setting("threads")] = _default("threads"),
 ) -> None:
-    """Train a policy with PPO (rsl-rl); Ctrl-C stops cleanly keeping the last checkpoint."""
+    """Train a policy with PPO (rsl-rl); Ctrl-C stops cleanly, keeping finished work."""
     # The parameters named after settings fields (locals() holds only parameters here).
     options = {k: v for k, v in locals().items() if k in TrainSettings.model_fields}
     from pydantic import ValidationError

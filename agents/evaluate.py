@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -194,6 +195,13 @@ class EvalSummary:
     crashes: int
     resets: int
     status: str
+
+    @property
+    def score(self) -> tuple[float, float, float]:
+        """Order of merit, higher is better: progress, then fewer off-tracks and crashes,
+        then an earlier finish."""
+        finish = self.total_time if self.total_time is not None else math.inf
+        return (self.progress, -float(self.off_track + self.crashes), -finish)
 
 
 def summary(result: RaceResult) -> EvalSummary:

@@ -1,6 +1,6 @@
 """``slipstream model pack``: a submission from a training run, or from a graph trained elsewhere.
 
-``pack RUN`` packs a Slipstream run's last checkpoint (:func:`agents.train.pack_run`);
+``pack RUN`` packs a Slipstream run's model, its best evaluation's (:func:`agents.train.pack_run`);
 ``pack --onnx policy.onnx --metadata model_metadata.json`` takes any trainer's ONNX graph
 and a DeepRacer metadata file, fills Slipstream's section from the graph
 (:func:`submissions.from_graph.derive_section`) and packs them. Either way the archive is

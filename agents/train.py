@@ -32,7 +32,13 @@ import torch
 
 import arena
 from agents import evaluate, export, networks, plots
-from agents.checkpoint import checkpoint, checkpoint_path, read_checkpoint, write_checkpoint
+from agents.checkpoint import (
+    checkpoint,
+    checkpoint_path,
+    model_checkpoint,
+    read_checkpoint,
+    write_checkpoint,
+)
 from agents.deepracer_metrics import TrainingMetricsLog, write_training_params
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
@@ -121,6 +127,7 @@ class Trainer:
         self.elapsed_before = 0.0
         self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
         self.eval_opponent = evaluate.run_opponent(settings) if self.writes_run_folder else None
+        self.best_score = _best_score(self.run_dir) if resume else None
 
     # ------------------------------------------------------------------ setup
     def _write_run_files(self) -> None:
@@ -183,7 +190,7 @@ class Trainer:
             self.start_iteration = int(ckpt["iteration"]) + 1
             self.elapsed_before = float(ckpt["elapsed_s"])
         elif self.clone is not None:
-            ckpt = read_checkpoint(self.clone, runner.device)
+            ckpt = read_checkpoint(self.clone, runner.device, model_checkpoint(self.clone))
             try:
                 runner.alg.load(ckpt, {"actor": True, "critic": True}, strict=True)
             except RuntimeError as exc:
@@ -206,6 +213,13 @@ class Trainer:
         if self.writes_run_folder:
             write_checkpoint(self.run_dir, content)
 
+    def _save_if_best(self, content: dict[str, Any], evaluation: EvalSummary) -> None:
+        """Keep ``content`` as ``best.pt`` when ``evaluation`` beats the run's best."""
+        if self.best_score is None or evaluation.score > self.best_score:
+            self.best_score = evaluation.score
+            best = {"eval_score": list(evaluation.score), "eval_best_lap": evaluation.best_lap}
+            write_checkpoint(self.run_dir, {**content, **best}, "best")
+
     # ------------------------------------------------------------------- loop
     def run(self, on_iteration: Callable[[IterationStats], None] | None = None) -> TrainResult:
         """Train until the iteration or time budget is spent (or Ctrl-C); write outputs.
@@ -227,7 +241,7 @@ class Trainer:
         finally:
             env.close()
         if self.writes_run_folder and checkpoint_path(self.run_dir).exists():
-            result.model_zip = self._package(result)
+            result.model_zip = self._package()
         return result
 
     def _loop(
@@ -262,7 +276,9 @@ class Trainer:
                 with _sigint_deferred():  # the iteration's outputs are written whole
                     self._write_outputs(stats)
                     if stats.eval is not None:
-                        self._save(self._checkpoint(runner, it, stats.elapsed_s))
+                        content = self._checkpoint(runner, it, stats.elapsed_s)
+                        self._save(content)
+                        self._save_if_best(content, stats.eval)
                         saved = it
                     finished, finished_at, before = it, stats.elapsed_s, None
                 self._record(result, stats)
@@ -378,34 +394,36 @@ class Trainer:
         policy = runner.alg.get_policy()
         return export.export_onnx(policy, s.sensors, s.action_space, stack_size=self.hp.stack_size)
 
-    def _package(self, result: TrainResult) -> Path:
-        best = {"best_lap": result.best_lap} if result.best_lap is not None else {}
-        return pack_run(self.run_dir, self.run_dir / "model" / "model.zip", best)
+    def _package(self) -> Path:
+        return pack_run(self.run_dir, self.run_dir / "model" / "model.zip")
 
 
 def _load_run(run_dir: str | Path, device: str) -> tuple[torch.nn.Module, TrainSettings, dict]:
-    """A run's actor (weights of ``checkpoints/last.pt``), settings and checkpoint."""
+    """A run's model: its actor (weights of ``checkpoints/best.pt``, else ``last.pt``),
+    settings and that checkpoint."""
     settings = load_settings(run_dir)
     stack_size = run_hyperparameters(run_dir).stack_size
     actor = networks.build_actor(
         settings.preset, settings.sensors, settings.action_space, stack_size=stack_size
     )
-    checkpoint = read_checkpoint(run_dir, device)
+    checkpoint = read_checkpoint(run_dir, device, model_checkpoint(run_dir))
     actor.load_state_dict(checkpoint["actor_state_dict"])
     return actor.to(device).eval(), settings, checkpoint
 
 
 def load_actor(run_dir: str | Path, device: str = "cpu") -> tuple[torch.nn.Module, TrainSettings]:
-    """A run's trained actor (from ``checkpoints/last.pt``) and its settings."""
+    """A run's trained actor (its best evaluation's, else the last) and its settings."""
     actor, settings, _ = _load_run(run_dir, device)
     return actor, settings
 
 
-def pack_run(run_dir: str | Path, out: str | Path, summary: dict[str, Any] | None = None) -> Path:
-    """Pack a run's last checkpoint as a submission at ``out`` (not validated here).
+def pack_run(run_dir: str | Path, out: str | Path) -> Path:
+    """Pack a run's model (its best evaluation's weights, else the last) as a submission
+    at ``out`` (not validated here).
 
     The archive holds the exported actor, the run's DeepRacer metadata, its reward file
-    when it still exists, ``metrics.csv`` and a training summary (plus ``summary``).
+    when it still exists, ``metrics.csv`` and a training summary (with the best lap of the
+    packed weights' evaluation).
     """
     run_dir = Path(run_dir)
     actor, s, ckpt = _load_run(run_dir, "cpu")
@@ -423,14 +441,21 @@ def pack_run(run_dir: str | Path, out: str | Path, summary: dict[str, Any] | Non
         training_summary={
             "track": s.track,
             "race_type": s.race_type,
-            "iterations": int(ckpt["iteration"]) + 1,
+            "iterations": int(ckpt["iteration"]) + 1,  # up to the packed weights
             "minutes": round(float(ckpt["elapsed_s"]) / 60.0, 2),
-            **(summary or {}),
+            **({"best_lap": ckpt["eval_best_lap"]} if ckpt.get("eval_best_lap") else {}),
         },
         reward_source=reward.read_text() if reward.suffix == ".py" and reward.is_file() else None,
         metrics_csv=metrics if metrics.is_file() else None,
         stack_size=stack_size,
     )
+
+
+def _best_score(run_dir: Path) -> tuple[float, ...] | None:
+    """The evaluation score kept with a run's ``best.pt`` (None without one)."""
+    if not checkpoint_path(run_dir, "best").exists():
+        return None
+    return tuple(read_checkpoint(run_dir, which="best")["eval_score"])
 
 
 def holds_run(run_dir: Path) -> bool:

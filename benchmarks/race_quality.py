@@ -7,8 +7,8 @@ the first clean evaluation (3 laps, every lap done, no off-track; from ``metrics
 the best evaluation lap and its ratio to the track's physical-limit lap (the racing line
 of the simulated car, ``agents.pursuit.car_limits`` + ``tracks.raceline``, as
 ``slipstream tracks raceline`` reports it), and the off-tracks and collisions of the
-final evaluation (the last periodic one if it came after the last iteration, else one
-raced here on the final weights). ``head_to_model`` starts from the time-trial run
+evaluation of the packed model (the run's best evaluation, whose weights ``model.zip``
+holds). ``head_to_model`` starts from the time-trial run
 (``clone``), trains against a pool of its own snapshots plus the time-trial model, and
 then races the time-trial parent :data:`H2M_RACES` seeded times: win rate, overtakes and
 at-fault collisions per race (the learner's, ``arena.racing_metrics``).
@@ -41,7 +41,7 @@ from agents.hyperparameters import Hyperparameters
 from agents.pursuit import car_limits
 from agents.selfplay import opponent_policy, read_policy_graph
 from agents.settings import TrainSettings, load_settings
-from agents.train import Trainer, TrainResult, load_actor, run_hyperparameters
+from agents.train import Trainer, TrainResult, run_hyperparameters
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
@@ -164,18 +164,13 @@ def first_clean_minutes(rows: list[dict[str, str]], laps: int) -> float | None:
     return None
 
 
-def final_evaluation(run_dir: Path, result: TrainResult) -> EvalSummary:
-    """The evaluation of the final weights: the trainer's if it evaluated the last
-    iteration, else a race of ``checkpoints/last.pt`` with the trainer's settings."""
-    last = result.iterations - 1
-    if result.evaluations and result.evaluations[-1].iteration == last:
-        summary = result.evaluations[-1].eval
-        assert summary is not None
-        return summary
-    actor, s = load_actor(run_dir)
-    config = evaluate.run_evaluation_config(s, run_hyperparameters(run_dir).stack_size)
-    race = evaluate.evaluate_policy(config, evaluate.TorchPolicy(actor, s.discrete))
-    return evaluate.summary(race)
+def model_evaluation(name: str, result: TrainResult) -> EvalSummary:
+    """The evaluation of the packed model's weights: the run's best (``checkpoints/best.pt``
+    keeps the first evaluation of the highest score)."""
+    evaluations = [s.eval for s in result.evaluations if s.eval is not None]
+    if not evaluations:
+        raise SystemExit(f"{name}: training ended before its first evaluation")
+    return max(evaluations, key=lambda e: e.score)
 
 
 def physical_limit_lap(track: str) -> float:
@@ -231,11 +226,8 @@ def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namesp
     rows = read_metrics(run_dir)
     elapsed = float(rows[-1]["elapsed_s"])
     steps = sum(int(r["steps"]) for r in rows)
-    final = final_evaluation(run_dir, result)
-    laps = [float(r["eval_best_lap"]) for r in rows if r["eval_best_lap"]]
-    if final.best_lap is not None:
-        laps.append(final.best_lap)
-    best = min(laps, default=None)
+    model = model_evaluation(name, result)
+    best = min((float(r["eval_best_lap"]) for r in rows if r["eval_best_lap"]), default=None)
     row = {
         "race_type": name,
         "sensors": "+".join(s.sensors),
@@ -244,8 +236,8 @@ def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namesp
         "clean_min": first_clean_minutes(rows, s.eval_laps),
         "best_lap": best,
         "limit_ratio": best / physical_limit_lap(s.track) if best is not None else None,
-        "off_track": final.off_track,
-        "collisions": final.crashes,
+        "off_track": model.off_track,
+        "collisions": model.crashes,
     }
     parent = RECIPES[name].parent
     if parent is not None:
@@ -263,8 +255,8 @@ COLUMNS = (
     ("min to clean 3 laps", "clean_min", "{:.1f}"),
     ("best lap (s)", "best_lap", "{:.2f}"),
     ("best / limit", "limit_ratio", "{:.2f}"),
-    ("final eval off-tracks", "off_track", "{}"),
-    ("final eval collisions", "collisions", "{}"),
+    ("model eval off-tracks", "off_track", "{}"),
+    ("model eval collisions", "collisions", "{}"),
     ("win rate vs parent", "win_rate", "{:.0%}"),
     ("overtakes / race", "overtakes", "{:.2f}"),
     ("at-fault collisions / race", "at_fault", "{:.2f}"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from copy import deepcopy
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from typer.testing import CliRunner
 import arena
 from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
+from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.settings import TrainSettings
 from agents.train import Trainer, load_actor
@@ -255,3 +257,40 @@ def test_ctrl_c_during_an_update_keeps_the_weights_it_started_from(tmp_path, mon
     assert ckpt["iteration"] == 0 and finished
     for key, value in finished.items():
         assert torch.equal(ckpt["actor_state_dict"][key], value), key
+
+
+def _eval(progress: float, incidents: int = 0, total: float | None = None) -> EvalSummary:
+    laps = int(progress // 100 * 3)
+    return EvalSummary(laps, progress, None, total, incidents, 0, incidents, "finished")
+
+
+def test_an_evaluation_is_ranked_by_progress_then_incidents_then_finish_time():
+    ranked = [_eval(50.0), _eval(100.0, 2, 30.0), _eval(100.0, 0, 40.0), _eval(100.0, 0, 35.0)]
+    assert sorted(ranked, key=lambda e: e.score) == ranked
+
+
+def test_the_packed_model_is_the_best_evaluation_s_and_resume_keeps_it(tmp_path, monkeypatch):
+    """model.zip, evaluate and --clone take checkpoints/best.pt; --resume takes last.pt."""
+    scripted = [_eval(30.0), _eval(100.0, 2, 30.0), _eval(100.0, 0, 40.0), _eval(50.0)]
+    monkeypatch.setattr(Trainer, "_evaluate", lambda trainer, runner: scripted.pop(0))
+    run = tmp_path / "run"
+    result = Trainer(_settings(iterations=3, eval_every=1), run, TINY).run()
+    best = torch.load(run / "checkpoints" / "best.pt", weights_only=True)
+    last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    assert (best["iteration"], last["iteration"]) == (2, 2)
+    Trainer(_settings(iterations=1, eval_every=1), run, TINY, resume=True).run()  # eval 50%
+    best = torch.load(run / "checkpoints" / "best.pt", weights_only=True)
+    last = torch.load(run / "checkpoints" / "last.pt", weights_only=True)
+    assert (best["iteration"], last["iteration"]) == (2, 3) and not scripted
+    assert best["eval_score"] == list(_eval(100.0, 0, 40.0).score)
+
+    actor, _ = load_actor(run)
+    for key, value in actor.state_dict().items():
+        assert torch.equal(value, best["actor_state_dict"][key]), key
+    assert any(
+        not torch.equal(value, last["actor_state_dict"][key])
+        for key, value in actor.state_dict().items()
+    )
+    with zipfile.ZipFile(result.model_zip) as packed:  # repacked by the resumed run
+        summary = json.loads(packed.read("model_metadata.json"))["slipstream"]["training"]
+    assert summary["iterations"] == 3  # best.pt's iteration 2, counted from 1
