@@ -28,8 +28,13 @@ from rich.table import Table
 
 from league.schemas import EventCreate
 
-SAMPLE_MODELS = ("sample-time-trial.zip", "sample-self-play.zip")
-RACERS = ("alice", "bob")
+SAMPLE_MODELS = (
+    "sample-time-trial.zip",
+    "sample-object-avoidance.zip",
+    "sample-head-to-bot.zip",
+    "sample-self-play.zip",
+)
+RACERS = ("alice", "bob", "carol", "dave")
 
 
 def demo_events(round_interval_s: int) -> list[EventCreate]:

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from league.demo import RACERS
+
 pytestmark = pytest.mark.slow
 
 
@@ -33,7 +35,8 @@ def test_demo_runs_entries_to_leaderboards(tmp_path: Path) -> None:
     assert "beginner_loop" in out and (tmp_path / "beginner_loop.png").exists()
     for title in ("Time Trial", "Object Avoidance", "Head-to-Bot", "Head-to-Model"):
         assert title in out
-    assert out.count("alice") >= 4 and out.count("bob") >= 4  # a row per event
+    for alias in RACERS:  # a row per event for each bundled sample model
+        assert out.count(alias) >= 4, alias
     assert "not every first race finished" not in out
     assert "stopped the server, the scheduler and the worker" in out
     with socket.socket() as sock:  # the server is gone
