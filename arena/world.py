@@ -90,16 +90,19 @@ def add_box(
     half = [size[0] / 2.0, size[1] / 2.0, size[2] / 2.0]
     col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=client)
     vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=color, physicsClientId=client)
-    quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
-    body = p.createMultiBody(0.0, col, vis, [x, y, half[2]], quat, physicsClientId=client)
+    body = p.createMultiBody(0.0, col, vis, *_standing(x, y, yaw, size[2]), physicsClientId=client)
     p.setCollisionFilterGroupMask(body, -1, OBSTACLE_GROUP, SOLID_MASK, physicsClientId=client)
     return body
 
 
 def move_box(client: int, body: int, x: float, y: float, yaw: float, height: float) -> None:
     """Stand a box made by :func:`add_box` (``height`` tall) at ``(x, y)`` facing ``yaw``."""
-    quat = p.getQuaternionFromEuler([0.0, 0.0, yaw])
-    p.resetBasePositionAndOrientation(body, [x, y, height / 2.0], quat, physicsClientId=client)
+    p.resetBasePositionAndOrientation(body, *_standing(x, y, yaw, height), physicsClientId=client)
+
+
+def _standing(x: float, y: float, yaw: float, height: float) -> tuple[list[float], tuple]:
+    """Base position and orientation of a box ``height`` tall standing at ``(x, y)``."""
+    return [x, y, height / 2.0], p.getQuaternionFromEuler([0.0, 0.0, yaw])
 
 
 def contact_pairs(
