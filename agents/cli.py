@@ -113,6 +113,7 @@ def train(
     races: Annotated[int | None, _setting("races")] = _default("races"),
     seed: Annotated[int, _setting("seed")] = _default("seed"),
     network: Annotated[str | None, _setting("network")] = _default("network"),
+    critic: Annotated[str, _setting("critic")] = _default("critic"),
     hyperparameters: Annotated[
         Path | None, typer.Option(help="DeepRacer hyperparameters.json.")
     ] = None,

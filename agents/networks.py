@@ -29,6 +29,7 @@ from rsl_rl.models import CNNModel
 from tensordict import TensorDict
 from torch import nn
 
+from agents.privileged import PRIVILEGED_GROUP
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.sensors_spec import IMAGE_SENSORS, LidarConfig, check_sensors, sensor_space
 
@@ -40,6 +41,14 @@ _CNN_LAYERS: dict[str, tuple[list[int], list[int], list[int]]] = {
     "CPU CNN": ([16, 32, 32], [5, 3, 3], [2, 2, 1]),
 }
 POOLED_CNN = "agents.networks:PooledCNNModel"
+# The critic of ``--critic privileged``: an MLP on the privileged state, inputs normalised
+# by running statistics (its features have different scales).
+PRIVILEGED_CRITIC: dict[str, Any] = {
+    "class_name": "MLPModel",
+    "hidden_dims": [256, 256],
+    "activation": "relu",
+    "obs_normalization": True,
+}
 PRESETS: dict[str, dict[str, Any]] = {
     "3-layer CNN": {"deepracer": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW", "hidden": [512]},
     "5-layer CNN": {"deepracer": "DEEP_CONVOLUTIONAL_NETWORK", "hidden": [512]},
@@ -128,8 +137,14 @@ def model_configs(
     preset: str,
     sensors: tuple[str, ...] | list[str],
     action_space: DiscreteActionSpace | ContinuousActionSpace,
+    critic_input: str = "sensors",
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, list[str]]]:
-    """``(actor_cfg, critic_cfg, obs_groups)`` for rsl-rl's runner config."""
+    """``(actor_cfg, critic_cfg, obs_groups)`` for rsl-rl's runner config.
+
+    The actor reads the sensors. The critic reads them too (``critic_input="sensors"``,
+    the same network as the actor's) or, with ``"privileged"``, only the privileged-state
+    group (:mod:`agents.privileged`) through :data:`PRIVILEGED_CRITIC`.
+    """
     check_preset(preset, sensors)
     names = list(check_sensors(sensors))
     base: dict[str, Any] = {
@@ -157,8 +172,11 @@ def model_configs(
     else:
         distribution = {"class_name": "GaussianDistribution", "init_std": 0.5}
     actor = {**base, "distribution_cfg": distribution}
-    critic = dict(base)
-    return actor, critic, {"actor": names, "critic": names}
+    if critic_input == "privileged":
+        return actor, dict(PRIVILEGED_CRITIC), {"actor": names, "critic": [PRIVILEGED_GROUP]}
+    if critic_input != "sensors":
+        raise ValueError(f"unknown critic input {critic_input!r}; use sensors or privileged")
+    return actor, dict(base), {"actor": names, "critic": names}
 
 
 def num_actions(action_space: DiscreteActionSpace | ContinuousActionSpace) -> int:

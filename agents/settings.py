@@ -19,6 +19,7 @@ from arena.config import RACE_TYPES, RaceType
 from arena.sensors_spec import IMAGE_SENSORS
 from tracks.catalog import Direction
 
+CriticInput = Literal["sensors", "privileged"]
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
 # The camera default before ``CPU CNN``: the preset of camera runs stored without one.
@@ -54,6 +55,11 @@ class TrainSettings(BaseModel):
         "follow_center_line", description="Reward-function file or bundled sample name."
     )
     network: str | None = Field(None, description="Network preset (default: by sensors).")
+    critic: CriticInput = Field(
+        "sensors",
+        description="What PPO's critic reads: sensors (the actor's network) or privileged "
+        "(an MLP on track-relative state; only the actor is exported).",
+    )
     seed: int = Field(0, description="Random seed.")
     workers: int | None = Field(
         None, description="Worker processes (default: CPU cores; 0: in-process)."

@@ -173,12 +173,15 @@ class Trainer:
             num_workers=s.workers,
             learner_cars=learners,
             device=s.device,
+            privileged=s.critic == "privileged",
         )
         return env, pool
 
     def _make_runner(self, env: RacingVecEnv) -> RacingRunner:
         s = self.settings
-        actor, critic, groups = networks.model_configs(s.preset, s.sensors, s.action_space)
+        actor, critic, groups = networks.model_configs(
+            s.preset, s.sensors, s.action_space, s.critic
+        )
         cfg = self.hp.to_rsl_rl(env.num_envs, actor, critic, groups, s.steps_per_env)
         log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None
         return RacingRunner(env, cfg, log_dir=log_dir, device=s.device)
@@ -191,8 +194,10 @@ class Trainer:
             self.elapsed_before = float(ckpt["elapsed_s"])
         elif self.clone is not None:
             ckpt = read_checkpoint(self.clone, runner.device, model_checkpoint(self.clone))
+            # A critic that reads other inputs than this run's cannot be reused: a fresh one.
+            same_critic = load_settings(self.clone).critic == self.settings.critic
             try:
-                runner.alg.load(ckpt, {"actor": True, "critic": True}, strict=True)
+                runner.alg.load(ckpt, {"actor": True, "critic": same_critic}, strict=True)
             except RuntimeError as exc:
                 raise ValueError(
                     f"cannot clone {self.clone}: its network does not match this run's "

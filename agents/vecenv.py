@@ -25,6 +25,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from agents.networks import observation_groups
+from agents.privileged import PRIVILEGED_GROUP, privileged_state
 from agents.rewards import resolve_reward
 from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
@@ -71,7 +72,8 @@ class EnvGroup:
     ``slot_offset`` is the global index of this group's first slot and ``total_slots`` the
     slot count of the whole vec env: a simtrace row's episode is
     ``episode_of_slot * total_slots + global_slot``, unique across groups and increasing
-    per slot.
+    per slot. ``privileged`` adds the :data:`~agents.privileged.PRIVILEGED_GROUP` to the
+    observations (for a privileged critic).
     """
 
     def __init__(
@@ -83,6 +85,7 @@ class EnvGroup:
         record_simtrace: bool = True,
         slot_offset: int = 0,
         total_slots: int | None = None,
+        privileged: bool = False,
     ) -> None:
         config = RaceConfig.from_json(config_json)
         reward_fn = resolve_reward(reward, config.race_type)
@@ -96,6 +99,7 @@ class EnvGroup:
         self.total_slots = total_slots or len(self.slots)
         self.discrete = isinstance(config.cars[0].action_space, DiscreteActionSpace)
         self.record_simtrace = record_simtrace
+        self.privileged = privileged
         self.rows: list[dict[str, Any]] = []
         self.opponents: dict[int, tuple[str, Any]] = {}
         self.last_obs: dict[tuple[int, str], dict[str, np.ndarray]] = {}
@@ -210,10 +214,20 @@ class EnvGroup:
 
     def _stack_obs(self) -> dict[str, np.ndarray]:
         first = self.last_obs[(self.slots[0].env, self.slots[0].car)]
-        return {
+        groups = {
             name: np.stack([self.last_obs[(s.env, s.car)][name] for s in self.slots])
             for name in first
         }
+        if self.privileged:
+            groups[PRIVILEGED_GROUP] = np.stack(
+                [
+                    privileged_state(
+                        self.envs[s.env].track, self.last_info[(s.env, s.car)]["params"]
+                    )
+                    for s in self.slots
+                ]
+            )
+        return groups
 
     def close(self) -> None:
         """Close every race."""
@@ -255,6 +269,8 @@ class RacingVecEnv(VecEnv):
         learner_cars: cars the shared policy drives (default: all); the others need
             opponents (:meth:`set_opponents`).
         record_simtrace: keep per-step simtrace rows (:meth:`drain_simtrace`).
+        privileged: add the privileged-state group (``agents.privileged``) to the
+            observations, for a critic that reads it.
     """
 
     def __init__(
@@ -267,6 +283,7 @@ class RacingVecEnv(VecEnv):
         learner_cars: list[str] | None = None,
         device: str = "cpu",
         record_simtrace: bool = True,
+        privileged: bool = False,
     ) -> None:
         if config.mode != "training":
             raise ValueError("RacingVecEnv needs a training-mode race config")
@@ -297,6 +314,7 @@ class RacingVecEnv(VecEnv):
                 "record_simtrace": record_simtrace,
                 "slot_offset": offsets[w],
                 "total_slots": self.num_envs,
+                "privileged": privileged,
             }
             for w, races in enumerate(self._races_of)
         ]

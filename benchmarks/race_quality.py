@@ -29,7 +29,7 @@ import csv
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 from rich.console import Console
 from rich.table import Table
@@ -40,7 +40,7 @@ from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.pursuit import car_limits
 from agents.selfplay import opponent_policy, read_policy_graph
-from agents.settings import TrainSettings, load_settings
+from agents.settings import CriticInput, TrainSettings, load_settings
 from agents.train import Trainer, TrainResult, run_hyperparameters
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track
@@ -112,6 +112,7 @@ def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None)
         action_space=parse_action_space_spec(recipe.action_space),
         reward_fn=recipe.reward_fn,
         network=recipe.network,
+        critic=args.critic,
         workers=workers,
         minutes=args.minutes,
         eval_every=args.eval_every,
@@ -272,7 +273,10 @@ def title(args: argparse.Namespace) -> str:
     """The table's title."""
     tracks = sorted({RECIPES[n].track for n in args.only})
     limits = ", ".join(f"{t} {physical_limit_lap(t):.2f} s" for t in tracks)
-    return f"race quality after {args.minutes:g} min per race type (physical-limit lap: {limits})"
+    return (
+        f"race quality after {args.minutes:g} min per race type, {args.critic} critic "
+        f"(physical-limit lap: {limits})"
+    )
 
 
 def markdown(rows: list[dict], heading: str) -> str:
@@ -296,6 +300,12 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--workers", type=int, help="worker processes (default: the recipe's)")
     parser.add_argument("--eval-every", type=int, default=5, help="evaluate every N iterations")
     parser.add_argument("--races", type=int, default=H2M_RACES, help="head_to_model races")
+    parser.add_argument(
+        "--critic",
+        choices=get_args(CriticInput),
+        default=TrainSettings.model_fields["critic"].default,
+        help="what PPO's critic reads (default: train's)",
+    )
     args = parser.parse_args()
     args.only = [n.strip() for n in args.only.split(",") if n.strip()]
     unknown = [n for n in args.only if n not in RECIPES]

@@ -1,7 +1,8 @@
 """Training cost: where an iteration's time goes (collection vs PPO update).
 
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
-evaluations or run files) for each ``--workers`` value and prints one table: samples/s
+evaluations or run files) for each ``--workers`` and ``--critic`` value and prints one
+table: samples/s
 end to end, collection and update seconds per iteration, the update's share, the value
 loss of the last iteration. The first iteration is a warm-up and is not counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
@@ -12,6 +13,7 @@ Run::
     .venv/bin/python benchmarks/train_profile.py --sensors camera --iterations 3
     .venv/bin/python benchmarks/train_profile.py --sensors camera --preset "3-layer CNN" \\
         --hyperparameters hp.json --workers 0,2 --profile
+    .venv/bin/python benchmarks/train_profile.py --sensors camera --critic sensors,privileged
 """
 
 from __future__ import annotations
@@ -35,16 +37,24 @@ from agents.runner import RacingRunner
 from agents.vecenv import RacingVecEnv
 
 
-def measure(args: argparse.Namespace, workers: int, hp: Hyperparameters) -> dict[str, float]:
+def measure(
+    args: argparse.Namespace, workers: int, critic: str, hp: Hyperparameters
+) -> dict[str, float]:
     """Train ``args.iterations`` (+1 warm-up) iterations; mean timings and the last losses."""
     sensors = tuple(args.sensors.split(","))
     space = parse_action_space_spec(args.action_space)
     preset = args.preset or networks.default_preset(sensors)
     config = arena.make_config(sensors=sensors, action_space=space, mode="training", seed=0)
-    env = RacingVecEnv(config, args.reward, num_races=max(1, workers), num_workers=workers)
+    env = RacingVecEnv(
+        config,
+        args.reward,
+        num_races=max(1, workers),
+        num_workers=workers,
+        privileged=critic == "privileged",
+    )
     try:
-        actor, critic, groups = networks.model_configs(preset, sensors, space)
-        cfg = hp.to_rsl_rl(env.num_envs, actor, critic, groups, args.steps_per_env)
+        actor_cfg, critic_cfg, groups = networks.model_configs(preset, sensors, space, critic)
+        cfg = hp.to_rsl_rl(env.num_envs, actor_cfg, critic_cfg, groups, args.steps_per_env)
         torch.manual_seed(0)
         runner = RacingRunner(env, cfg, log_dir=None, device="cpu")
         runner.start()
@@ -71,6 +81,7 @@ def measure(args: argparse.Namespace, workers: int, hp: Hyperparameters) -> dict
         return {
             "workers": workers,
             "preset": preset,
+            "critic": critic,
             "samples": samples,
             "minibatches": algorithm["num_mini_batches"] * algorithm["num_learning_epochs"],
             "samples_per_s": samples * n / (collect + update),
@@ -93,15 +104,24 @@ def main() -> None:
     parser.add_argument("--hyperparameters", type=Path, default=None)
     parser.add_argument("--steps-per-env", type=int, default=None)
     parser.add_argument("--workers", default="0", help="comma-separated, e.g. 0,2")
+    parser.add_argument(
+        "--critic",
+        default="sensors",
+        help="what the critic reads, comma-separated: sensors,privileged",
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--profile", action="store_true")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
-    rows = [measure(args, int(w), hp or Hyperparameters()) for w in args.workers.split(",")]
+    rows = [
+        measure(args, int(w), critic, hp or Hyperparameters())
+        for w in args.workers.split(",")
+        for critic in args.critic.split(",")
+    ]
     table = Table(title=f"training cost: {args.sensors}, {args.iterations} iterations")
     for column in (
-        "workers", "preset", "samples/it", "minibatches/it", "samples/s",
+        "workers", "preset", "critic", "samples/it", "minibatches/it", "samples/s",
         "collect s/it", "update s/it", "update share", "value loss",
     ):  # fmt: skip
         table.add_column(column)
@@ -110,6 +130,7 @@ def main() -> None:
         table.add_row(
             str(r["workers"]),
             str(r["preset"]),
+            str(r["critic"]),
             str(r["samples"]),
             str(r["minibatches"]),
             f"{r['samples_per_s']:.0f}",

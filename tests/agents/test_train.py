@@ -7,6 +7,7 @@ import zipfile
 from copy import deepcopy
 from pathlib import Path
 
+import onnx
 import pytest
 import torch
 from deepracer.logs import DeepRacerLog
@@ -17,7 +18,9 @@ from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
-from agents.settings import TrainSettings
+from agents.privileged import PRIVILEGED_SIZE
+from agents.selfplay import read_policy_graph
+from agents.settings import TrainSettings, load_settings
 from agents.train import Trainer, load_actor
 from agents.vecenv import RacingVecEnv
 
@@ -105,6 +108,34 @@ def test_clone_with_changed_speed_range(tmp_path):
     trainer = Trainer(other, tmp_path / "c", TINY, clone=tmp_path / "a")
     with pytest.raises(ValueError, match="cannot clone"):
         trainer.run()
+
+
+def test_a_privileged_critic_trains_resumes_clones_and_exports_a_sensor_only_model(tmp_path):
+    """The critic reads the privileged state; the packed model reads only the sensors."""
+    privileged = _settings(iterations=1, critic="privileged")
+    run = tmp_path / "privileged"
+    result = Trainer(privileged, run, TINY).run()
+    critic = torch.load(run / "checkpoints" / "last.pt", weights_only=True)["critic_state_dict"]
+    first_layer = next(v for k, v in critic.items() if k.endswith("weight"))
+    assert first_layer.shape[1] == PRIVILEGED_SIZE
+    graph = onnx.load_from_string(read_policy_graph(result.model_zip))
+    assert [i.name for i in graph.graph.input] == ["lidar"]
+    assert load_settings(run).critic == "privileged"
+    Trainer(privileged, run, TINY, resume=True).run()  # loads the privileged critic, strict
+    assert torch.load(run / "checkpoints" / "last.pt", weights_only=True)["iteration"] == 1
+
+    Trainer(_settings(iterations=1), tmp_path / "sensors", TINY).run()  # a sensor critic
+    trainer = Trainer(privileged, tmp_path / "clone", TINY, clone=tmp_path / "sensors")
+    env, _ = trainer._make_env()
+    try:
+        runner = trainer._make_runner(env)
+        trainer._load_weights(runner)  # the actor only: the parent's critic reads lidar
+        parent, _ = load_actor(tmp_path / "sensors")
+        cloned = runner.alg.get_policy().state_dict()
+        for key, value in parent.state_dict().items():
+            assert torch.equal(cloned[key], value), key
+    finally:
+        env.close()
 
 
 def test_ctrl_c_keeps_the_last_finished_iteration(tmp_path):
