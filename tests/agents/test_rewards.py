@@ -102,6 +102,16 @@ def test_samples_prefer_what_they_document() -> None:
     cars = sample_params("head_to_model")
     h2h = load_sample("head_to_head", "head_to_model")
     assert h2h({**cars, "is_crashed": True}) < h2h(cars)
+    racing = {**cars, "steps": 40, "progress": 10.0}
+    assert h2h(racing) > h2h({**racing, "progress": 5.0})  # a lap made faster pays more
+    ahead = cars["closest_objects"][1]
+    tailing = {**racing, "is_left_of_center": cars["objects_left_of_center"][ahead]}
+    tailing["objects_distance"] = list(cars["objects_distance"])
+    tailing["objects_distance"][ahead] = (cars["projection_distance"] + 0.3) % cars[
+        "track_length"
+    ]
+    beside = {**tailing, "is_left_of_center": not tailing["is_left_of_center"]}
+    assert h2h(beside) > h2h(tailing)  # the other lane, where it can pass, pays more
 
 
 CLASSIC_EXAMPLES = {
