@@ -62,16 +62,21 @@ def _mean_step_reward(act, reward: str, steps: int = 300) -> float:
 
 @pytest.mark.slow
 def test_ppo_beats_a_random_policy(tmp_path):
-    """PPO must beat uniform random actions by 30% in reward per step (measured: 1.6x).
+    """PPO must beat uniform random actions by 1.8x in reward per step.
 
     Lidar sees no track edges on an empty track (every beam reads the 1 m clip), so the
     reward here depends on the action itself (full speed pays 1.0, else 0.1), which a
-    blind policy can learn; random actions earn about 0.4 per step.
+    blind policy can learn; random actions earn about 0.4 per step. The discount is 0.9
+    because each step's reward is its own: with DeepRacer's 0.999 the returns of 1,500
+    samples hardly tell the actions apart (1.1-1.7x over seeds 0-2, either critic); with
+    0.9 seeds 0-2 reached 2.2-2.4x with either critic.
     """
     torch.manual_seed(0)
     reward = tmp_path / "fast.py"
     reward.write_text(FAST_REWARD)
-    hp = Hyperparameters(batch_size=128, num_epochs=5, lr=1e-3, beta_entropy=0.0)
+    hp = Hyperparameters(
+        batch_size=128, num_epochs=5, lr=1e-3, beta_entropy=0.0, discount_factor=0.9
+    )
     settings = _settings(races=2, iterations=6, steps_per_env=128, reward_fn=str(reward))
     Trainer(settings, tmp_path / "run", hp).run()
     actor, _ = load_actor(tmp_path / "run")
@@ -87,7 +92,7 @@ def test_ppo_beats_a_random_policy(tmp_path):
 
     random_reward = _mean_step_reward(random_act, str(reward))
     trained_reward = _mean_step_reward(trained_act, str(reward))
-    assert trained_reward > 1.3 * random_reward, (trained_reward, random_reward)
+    assert trained_reward > 1.8 * random_reward, (trained_reward, random_reward)
 
 
 def test_clone_with_changed_speed_range(tmp_path):
