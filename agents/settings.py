@@ -9,6 +9,7 @@ read it at start-up.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any, Literal
 
@@ -24,6 +25,8 @@ CriticInput = Literal["sensors", "privileged"]
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
 # The camera default before ``CPU CNN``: the preset of camera runs stored without one.
 FORMER_CAMERA_PRESET = "3-layer CNN"
+# The critic of runs stored before the ``critic`` setting existed.
+FORMER_CRITIC: CriticInput = "sensors"
 # Names used by ``training_settings.json`` files written before the fields took the
 # command line's names; such files still load.
 _FORMER_NAMES = {
@@ -56,9 +59,9 @@ class TrainSettings(BaseModel):
     )
     network: str | None = Field(None, description="Network preset (default: by sensors).")
     critic: CriticInput = Field(
-        "sensors",
-        description="What PPO's critic reads: sensors (the actor's network) or privileged "
-        "(an MLP on track-relative state; only the actor is exported).",
+        "privileged",
+        description="What PPO's critic reads: privileged (an MLP on track-relative state; "
+        "only the actor is exported) or sensors (the actor's network).",
     )
     seed: int = Field(0, description="Random seed.")
     workers: int | None = Field(
@@ -129,9 +132,11 @@ def load_settings(run_dir: str | Path) -> TrainSettings:
     """The settings a run was started with (``RUN/training_settings.json``).
 
     Runs store their preset by name; a camera run stored without one was trained when the
-    camera default was ``3-layer CNN``, so it gets that network back.
+    camera default was ``3-layer CNN``, so it gets that network back. A run stored without
+    a ``critic`` was trained when the critic read the sensors, so it gets that critic.
     """
-    settings = TrainSettings.model_validate_json(settings_path(run_dir).read_text())
+    stored = json.loads(settings_path(run_dir).read_text())
+    settings = TrainSettings.model_validate({"critic": FORMER_CRITIC, **stored})
     if settings.network is None and set(IMAGE_SENSORS) & set(settings.sensors):
         return settings.model_copy(update={"network": FORMER_CAMERA_PRESET})
     return settings

@@ -2,9 +2,8 @@
 
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
 evaluations or run files) for each ``--workers`` and ``--critic`` value and prints one
-table: samples/s
-end to end, collection and update seconds per iteration, the update's share, the value
-loss of the last iteration. The first iteration is a warm-up and is not counted.
+table: samples/s end to end, collection and update seconds per iteration, the update's
+share, the value loss of the last iteration. The first iteration is a warm-up and is not counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
 time.
 
@@ -34,6 +33,7 @@ from agents import networks
 from agents.action_spaces import parse_action_space_spec
 from agents.hyperparameters import Hyperparameters
 from agents.runner import RacingRunner
+from agents.settings import TrainSettings
 from agents.vecenv import RacingVecEnv
 
 
@@ -106,8 +106,8 @@ def main() -> None:
     parser.add_argument("--workers", default="0", help="comma-separated, e.g. 0,2")
     parser.add_argument(
         "--critic",
-        default="sensors",
-        help="what the critic reads, comma-separated: sensors,privileged",
+        default=TrainSettings.model_fields["critic"].default,
+        help="what the critic reads, comma-separated: privileged,sensors (default: train's)",
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--profile", action="store_true")

@@ -20,7 +20,7 @@ from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.privileged import PRIVILEGED_SIZE
 from agents.selfplay import read_policy_graph
-from agents.settings import TrainSettings, load_settings
+from agents.settings import TrainSettings, load_settings, settings_path
 from agents.train import Trainer, load_actor
 from agents.vecenv import RacingVecEnv
 
@@ -129,7 +129,7 @@ def test_a_privileged_critic_trains_resumes_clones_and_exports_a_sensor_only_mod
     Trainer(privileged, run, TINY, resume=True).run()  # loads the privileged critic, strict
     assert torch.load(run / "checkpoints" / "last.pt", weights_only=True)["iteration"] == 1
 
-    Trainer(_settings(iterations=1), tmp_path / "sensors", TINY).run()  # a sensor critic
+    Trainer(_settings(iterations=1, critic="sensors"), tmp_path / "sensors", TINY).run()
     trainer = Trainer(privileged, tmp_path / "clone", TINY, clone=tmp_path / "sensors")
     env, _ = trainer._make_env()
     try:
@@ -141,6 +141,16 @@ def test_a_privileged_critic_trains_resumes_clones_and_exports_a_sensor_only_mod
             assert torch.equal(cloned[key], value), key
     finally:
         env.close()
+
+
+def test_a_run_stored_before_the_critic_setting_resumes_with_its_sensor_critic(tmp_path):
+    Trainer(_settings(iterations=1, critic="sensors"), tmp_path, TINY).run()
+    stored = json.loads(settings_path(tmp_path).read_text())
+    del stored["critic"]  # as written before the setting existed
+    settings_path(tmp_path).write_text(json.dumps(stored))
+    settings = load_settings(tmp_path)
+    assert settings.critic == "sensors"
+    Trainer(settings, tmp_path, TINY, resume=True).run()  # strict load of the sensor critic
 
 
 def test_ctrl_c_keeps_the_last_finished_iteration(tmp_path):
