@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import get_args
 
 from rich.console import Console
 from rich.table import Table
@@ -24,7 +25,7 @@ import arena
 from agents.action_spaces import parse_action_space_spec
 from agents.hyperparameters import Hyperparameters
 from agents.pursuit import PurePursuitPolicy
-from agents.settings import TrainSettings
+from agents.settings import CriticInput, TrainSettings
 from agents.train import Trainer
 from arena.race import run_race
 from tracks.catalog import get_track
@@ -48,7 +49,7 @@ def references() -> tuple[float, float | None]:
     return limit, result.car("car0").best_lap
 
 
-def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
+def train_case(case: str, max_minutes: float, out: Path, workers: int, critic: CriticInput) -> dict:
     """Train one sensor case until a clean 3-lap evaluation or the time cap."""
     settings = TrainSettings(
         track=TRACK,
@@ -62,6 +63,7 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int) -> dict:
         eval_every=4,
         eval_time_limit=240.0,  # 3 laps at the slowest speed (1/3 m/s) fit
         stop_on_clean_eval=True,
+        critic=critic,
     )
     started = time.monotonic()
     result = Trainer(settings, out / case.replace("+", "_"), HYPERPARAMETERS).run()
@@ -92,11 +94,19 @@ def main() -> None:
     parser.add_argument("--max-minutes", type=float, default=15.0)
     parser.add_argument("--workers", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("runs/time_to_lap"))
+    parser.add_argument(
+        "--critic",
+        choices=get_args(CriticInput),
+        default=TrainSettings.model_fields["critic"].default,
+        help="what PPO's critic reads (default: train's)",
+    )
     args = parser.parse_args()
     cases = args.case or list(DEFAULT_CASES)
     limit, pursuit = references()
-    rows = [train_case(c, args.max_minutes, args.out, args.workers) for c in cases]
-    table = Table(title=f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line)")
+    rows = [train_case(c, args.max_minutes, args.out, args.workers, args.critic) for c in cases]
+    table = Table(
+        title=f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line, {args.critic} critic)"
+    )
     columns = ("policy", "minutes to clean 3 laps", "iterations", "clean run: best lap / total")
     for column in (*columns, "best eval lap (s)"):
         table.add_column(column)
