@@ -21,7 +21,7 @@ preset             layers
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, get_args
 
 import numpy as np
 import torch
@@ -29,7 +29,7 @@ from rsl_rl.models import CNNModel
 from tensordict import TensorDict
 from torch import nn
 
-from agents.privileged import PRIVILEGED_GROUP
+from agents.privileged import PRIVILEGED_GROUP, CriticInput
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.sensors_spec import IMAGE_SENSORS, LidarConfig, check_sensors, sensor_space
 
@@ -137,7 +137,7 @@ def model_configs(
     preset: str,
     sensors: tuple[str, ...] | list[str],
     action_space: DiscreteActionSpace | ContinuousActionSpace,
-    critic_input: str = "sensors",
+    critic_input: CriticInput = "sensors",
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, list[str]]]:
     """``(actor_cfg, critic_cfg, obs_groups)`` for rsl-rl's runner config.
 
@@ -175,7 +175,8 @@ def model_configs(
     if critic_input == "privileged":
         return actor, dict(PRIVILEGED_CRITIC), {"actor": names, "critic": [PRIVILEGED_GROUP]}
     if critic_input != "sensors":
-        raise ValueError(f"unknown critic input {critic_input!r}; use sensors or privileged")
+        choices = " or ".join(get_args(CriticInput))
+        raise ValueError(f"unknown critic input {critic_input!r}; use {choices}")
     return actor, dict(base), {"actor": names, "critic": names}
 
 

@@ -23,13 +23,15 @@ The vector, :data:`PRIVILEGED_SIZE` float32 values:
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from arena.car_spec import DEFAULT_CAR
 from tracks.track import Track
 
+# What PPO's critic may read: the actor's sensors, or this module's vector.
+CriticInput = Literal["sensors", "privileged"]
 # The observation group the critic reads (beside the sensors' groups).
 PRIVILEGED_GROUP = "privileged"
 LOOKAHEAD_M = (0.0, 0.5, 1.0, 2.0, 3.0)
@@ -74,8 +76,7 @@ def _objects(
     out = np.zeros((AHEAD + 1, _OBJECT_FEATURES))
     if not params["objects_distance"]:
         return out.ravel()
-    gaps = np.asarray(track.arc_delta(arc, np.asarray(params["objects_distance"], dtype=float)))
-    gaps = np.atleast_1d(gaps)
+    gaps = np.atleast_1d(track.arc_delta(arc, np.asarray(params["objects_distance"], dtype=float)))
     ahead = [i for i in np.argsort(gaps) if 0.0 <= gaps[i] <= SIGHT_M][:AHEAD]
     behind = [i for i in np.argsort(-gaps) if -SIGHT_M <= gaps[i] < 0.0][:1]
     rows = list(range(len(ahead))) + ([AHEAD] if behind else [])

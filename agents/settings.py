@@ -15,12 +15,12 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from agents.privileged import CriticInput
 from arena.actions import ActionSpace, DiscreteActionSpace
 from arena.config import RACE_TYPES, RaceType
 from arena.sensors_spec import IMAGE_SENSORS
 from tracks.catalog import Direction
 
-CriticInput = Literal["sensors", "privileged"]
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
 # The camera default before ``CPU CNN``: the preset of camera runs stored without one.

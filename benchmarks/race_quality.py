@@ -38,9 +38,10 @@ from agents import evaluate
 from agents.action_spaces import parse_action_space_spec
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
+from agents.privileged import CriticInput
 from agents.pursuit import car_limits
 from agents.selfplay import opponent_policy, read_policy_graph
-from agents.settings import CriticInput, TrainSettings, load_settings
+from agents.settings import TrainSettings, load_settings
 from agents.train import Trainer, TrainResult, run_hyperparameters
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track

@@ -24,8 +24,9 @@ from rich.table import Table
 import arena
 from agents.action_spaces import parse_action_space_spec
 from agents.hyperparameters import Hyperparameters
+from agents.privileged import CriticInput
 from agents.pursuit import PurePursuitPolicy
-from agents.settings import CriticInput, TrainSettings
+from agents.settings import TrainSettings
 from agents.train import Trainer
 from arena.race import run_race
 from tracks.catalog import get_track

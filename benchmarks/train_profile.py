@@ -3,7 +3,8 @@
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
 evaluations or run files) for each ``--workers`` and ``--critic`` value and prints one
 table: samples/s end to end, collection and update seconds per iteration, the update's
-share, the value loss of the last iteration. The first iteration is a warm-up and is not counted.
+share, the value loss of the last iteration. The first iteration is a warm-up and is not
+counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
 time.
 
@@ -32,13 +33,14 @@ import arena
 from agents import networks
 from agents.action_spaces import parse_action_space_spec
 from agents.hyperparameters import Hyperparameters
+from agents.privileged import CriticInput
 from agents.runner import RacingRunner
 from agents.settings import TrainSettings
 from agents.vecenv import RacingVecEnv
 
 
 def measure(
-    args: argparse.Namespace, workers: int, critic: str, hp: Hyperparameters
+    args: argparse.Namespace, workers: int, critic: CriticInput, hp: Hyperparameters
 ) -> dict[str, float]:
     """Train ``args.iterations`` (+1 warm-up) iterations; mean timings and the last losses."""
     sensors = tuple(args.sensors.split(","))
