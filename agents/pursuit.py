@@ -84,8 +84,8 @@ class PurePursuitPolicy:
         that over a few steps the chosen angles average out to the wanted one.
         """
         if params is None:
-            raise ValueError("PurePursuitPolicy needs the race params")
-        steer, speed = self.command(params["x"], params["y"], params["heading"], params["speed"])
+            raise ValueError(f"{type(self).__name__} needs the race params")
+        steer, speed = self.command_for(params)
         if not isinstance(self.space, DiscreteActionSpace):
             return nearest_action(self.space, steer, speed)
         wanted = steer + self._carry
@@ -100,6 +100,10 @@ class PurePursuitPolicy:
         speeds = sorted({a.speed for a in self.space.actions})
         below = [v for v in speeds if v <= speed + 1e-9]
         return below[-1] if below else speeds[0]
+
+    def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
+        """``(steering_deg, speed)`` for the car that DeepRacer's ``params`` describe."""
+        return self.command(params["x"], params["y"], params["heading"], params["speed"])
 
     def command(self, x: float, y: float, heading_deg: float, speed: float) -> tuple[float, float]:
         """``(steering_deg, speed)`` for a car whose model point is at ``(x, y)``."""
@@ -129,3 +133,110 @@ class PurePursuitPolicy:
             line.speed[start:end] if end >= start else np.r_[line.speed[start:], line.speed[:end]]
         )
         return min(end_speed, float(window.min())) if window.size else end_speed
+
+
+# Passing (PassingPursuitPolicy): objects this far ahead are planned around, the larger of
+# a distance and a time at the car's speed; one still this far beside or behind the car
+# (centre to centre) is not yet passed.
+PASS_HORIZON_M = 1.5
+PASS_HORIZON_S = 0.8
+PASS_BESIDE_M = 0.45
+# Centre-to-centre lateral distance kept from an object: half its width (a box 0.25 m, a
+# car 0.1 m; the params do not say which, so an object moving faster than MOVING_MPS is
+# taken for a car), half the car's (0.1 m) and a margin; and the margin kept from the
+# track's edge.
+BOX_CLEARANCE_M = 0.45
+CAR_CLEARANCE_M = 0.32
+MOVING_MPS = 0.1
+PASS_EDGE_MARGIN_M = 0.06
+# The highest speed asked for while steering around an object (a tighter, steadier line).
+PASS_SPEED = 3.0
+# Off the racing line by more than this (after a pass), the car rejoins it at PASS_SPEED.
+REJOIN_M = 0.15
+# A car ahead is passed on the far side only when it is at least this far ahead (else the
+# pass would cut across its nose): closer, the car follows it on its own side.
+CROSS_GAP_M = 1.5
+FOLLOW_MIN_SPEED = 0.5  # DeepRacer's lowest speed
+
+
+class PassingPursuitPolicy(PurePursuitPolicy):
+    """Pure pursuit on the racing line that steers around the objects ahead of it.
+
+    Boxes, bots and other cars come from the params (``objects_*``). When one lies within
+    :data:`PASS_HORIZON_S` seconds (at least :data:`PASS_HORIZON_M` metres) ahead, or
+    still beside the car, and the car's way from where it is to the racing line would pass
+    it closer than the clearance, the car aims beside it instead, at most at
+    :data:`PASS_SPEED`: on the side it is already on when the track has room there, else
+    on the far side. A car too close ahead to cross in front of (:data:`CROSS_GAP_M`) is
+    followed on this side at its speed until there is room. Off the line by more than
+    :data:`REJOIN_M`, it rejoins the line at most at :data:`PASS_SPEED`. It is the teacher that
+    ``--teacher pursuit`` imitates (``agents.imitation``); with no objects near it drives
+    exactly as :class:`PurePursuitPolicy`.
+    """
+
+    def __init__(self, track: Track, *args: Any, **kwargs: Any) -> None:
+        super().__init__(track, *args, **kwargs)
+        self.track = track
+        where = track.project(self.line.points)
+        order = np.argsort(where.arc_length)
+        self._line_arc = where.arc_length[order]
+        self._line_offset = where.offset[order]
+        self._room = 0.5 * track.width - 0.5 * DEFAULT_CAR.width - PASS_EDGE_MARGIN_M
+
+    def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
+        """The racing-line command, or one aimed beside an object in the way."""
+        steer, speed = super().command_for(params)
+        way = self._way_past(params)
+        if way is None:
+            off_line = abs(_offset(params) - self._line_offset_at(params["projection_distance"]))
+            return steer, min(speed, PASS_SPEED) if off_line > REJOIN_M else speed
+        offset, most = way
+        yaw = math.radians(params["heading"])
+        rear = np.array(DEFAULT_CAR.rear_axle(params["x"], params["y"], yaw))
+        distance = self.lookahead + self.lookahead_per_speed * min(params["speed"], most)
+        arc = float(self.track.project(rear[None]).arc_length[0]) + distance
+        target, _ = self.track.pose_at(self.track.wrap_arc_length(arc), offset)
+        return pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target), min(speed, most)
+
+    def _way_past(self, params: dict[str, Any]) -> tuple[float, float] | None:
+        """``(lateral offset to aim at, m left positive; speed cap)`` past the nearest
+        object in the way, or None to follow the racing line."""
+        if not params["objects_distance"]:
+            return None
+        arc = float(params["projection_distance"])
+        gaps = np.atleast_1d(
+            self.track.arc_delta(arc, np.asarray(params["objects_distance"], dtype=float))
+        )
+        horizon = max(PASS_HORIZON_M, PASS_HORIZON_S * float(params["speed"]))
+        here = _offset(params)
+        for i in np.argsort(gaps):
+            if not -PASS_BESIDE_M <= gaps[i] <= horizon:
+                continue
+            side = 1.0 if params["objects_left_of_center"][i] else -1.0
+            obstacle = side * float(params["objects_distance_from_center"][i])
+            object_speed = float(params["objects_speed"][i])
+            clearance = CAR_CLEARANCE_M if object_speed > MOVING_MPS else BOX_CLEARANCE_M
+            # From where the car is to the line's offset at the object, all the way clear?
+            low, high = sorted((here, self._line_offset_at(arc + gaps[i])))
+            if max(low - obstacle, obstacle - high) >= clearance:
+                continue
+            lean = 1.0 if low + high >= 2.0 * obstacle else -1.0
+            near_side, far_side = obstacle + lean * clearance, obstacle - lean * clearance
+            if abs(near_side) <= self._room:
+                return near_side, PASS_SPEED
+            crossable = object_speed <= MOVING_MPS or gaps[i] >= CROSS_GAP_M
+            if abs(far_side) <= self._room and crossable:
+                return far_side, PASS_SPEED
+            follow = max(object_speed, FOLLOW_MIN_SPEED)
+            return float(np.clip(near_side, -self._room, self._room)), follow
+        return None
+
+    def _line_offset_at(self, arc: float) -> float:
+        """The racing line's lateral offset where the centre line is ``arc`` metres long."""
+        period = self.track.length if self.track.is_loop else None
+        return float(np.interp(arc, self._line_arc, self._line_offset, period=period))
+
+
+def _offset(params: dict[str, Any]) -> float:
+    """The car's signed lateral offset from the centre line (m, left positive)."""
+    return (1.0 if params["is_left_of_center"] else -1.0) * float(params["distance_from_center"])

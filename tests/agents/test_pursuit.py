@@ -9,7 +9,13 @@ import pytest
 
 import arena
 from agents.action_spaces import continuous_action_space, parse_action_space_spec
-from agents.pursuit import DEFAULT_LIMITS, PurePursuitPolicy, car_limits, racing_line_for
+from agents.pursuit import (
+    DEFAULT_LIMITS,
+    PassingPursuitPolicy,
+    PurePursuitPolicy,
+    car_limits,
+    racing_line_for,
+)
 from arena.car_spec import DEFAULT_CAR, CarSpec
 from arena.race import run_race
 from tracks.catalog import get_track
@@ -82,3 +88,43 @@ def test_racing_line_limits_are_the_cars() -> None:
     assert (wide_and_slow.max_speed, wide_and_slow.car_width) == (2.5, 0.3)
     policy = PurePursuitPolicy(get_track(TRACK), continuous_action_space())
     assert policy.line.limits == car_limits()
+
+
+def _race_with_objects(policy_class: type, track: str, race_type: str, seed: int):
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    config = arena.make_config(
+        track=track, race_type=race_type, action_space=space, laps=3, seed=seed, time_limit_s=60
+    )
+    policy = policy_class(get_track(track), space)
+    return run_race(config, {"car0": policy}, record_trace=False).car("car0")
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_passing_pursuit_steers_around_the_boxes_the_plain_one_hits(seed) -> None:
+    """Six boxes on the speedway: plain pursuit drives into them; the passing driver laps
+    clean within 1.45x of the physical limit (1.37x measured)."""
+    plain = _race_with_objects(PurePursuitPolicy, "slipstream_speedway", "object_avoidance", seed)
+    passing = _race_with_objects(
+        PassingPursuitPolicy, "slipstream_speedway", "object_avoidance", seed
+    )
+    assert plain.crash_count >= 3
+    assert passing.laps == 3 and passing.crash_count == 0 and passing.off_track_count == 0
+    limit = compute_racing_line(get_track("slipstream_speedway")).lap_time
+    assert passing.best_lap < 1.45 * limit
+
+
+def test_passing_pursuit_races_bots_without_crashing_into_them() -> None:
+    car = _race_with_objects(PassingPursuitPolicy, TRACK, "head_to_bot", seed=0)
+    assert car.laps == 3 and car.crash_count == 0 and car.off_track_count == 0
+
+
+def test_passing_pursuit_without_objects_drives_the_racing_line() -> None:
+    """With nothing to pass it laps as plain pursuit does (within a step per lap)."""
+    plain, _ = _race("continuous:-30:30:0.5:4")
+    track = get_track(TRACK)
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    config = arena.make_config(track=TRACK, action_space=space, laps=2, sensors=("sector_lidar",))
+    result = run_race(config, {"car0": PassingPursuitPolicy(track, space)}, record_trace=False)
+    passing = result.car("car0")
+    assert passing.off_track_count == 0
+    assert passing.lap_times == pytest.approx(plain.lap_times, abs=1.0 / 15)
