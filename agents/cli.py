@@ -114,6 +114,7 @@ def train(
     seed: Annotated[int, _setting("seed")] = _default("seed"),
     network: Annotated[str | None, _setting("network")] = _default("network"),
     critic: Annotated[str, _setting("critic")] = _default("critic"),
+    teacher: Annotated[str | None, _setting("teacher")] = _default("teacher"),
     hyperparameters: Annotated[
         Path | None, typer.Option(help="DeepRacer hyperparameters.json.")
     ] = None,
@@ -124,7 +125,8 @@ def train(
     device: Annotated[str, _setting("device")] = _default("device"),
     threads: Annotated[int, _setting("threads")] = _default("threads"),
 ) -> None:
-    """Train a policy with PPO (rsl-rl); Ctrl-C stops cleanly, keeping finished work."""
+    """Train a policy with PPO (rsl-rl), or by imitation (--teacher); Ctrl-C stops cleanly,
+    keeping finished work."""
     # The parameters named after settings fields (locals() holds only parameters here).
     options = {k: v for k, v in locals().items() if k in TrainSettings.model_fields}
     from pydantic import ValidationError

@@ -27,12 +27,17 @@ METRICS_COLUMNS = (
     "value_loss",
     "surrogate_loss",
     "entropy",
+    "imitation_loss",
 )
 
 
 @dataclass(frozen=True)
 class IterationStats:
-    """What one training iteration did: its rollout's episodes, PPO losses, evaluation."""
+    """What one training iteration did: its rollout's episodes, losses, evaluation.
+
+    A PPO iteration has value, surrogate and entropy losses; an imitation iteration
+    (``--teacher``) has the imitation loss alone (None: the loss is not the algorithm's).
+    """
 
     iteration: int
     elapsed_s: float  # training time of the run so far, earlier sessions included
@@ -41,10 +46,11 @@ class IterationStats:
     mean_reward: float  # per ended episode (0 when none ended)
     mean_progress: float  # % of a lap, per ended episode
     lap_completion: float  # share of ended episodes that completed their lap
-    value_loss: float
-    surrogate_loss: float
-    entropy: float
+    value_loss: float | None
+    surrogate_loss: float | None
+    entropy: float | None
     eval: EvalSummary | None = None  # the evaluation race after this iteration, if one ran
+    imitation_loss: float | None = None
 
     @classmethod
     def of_iteration(
@@ -66,10 +72,11 @@ class IterationStats:
             mean_reward=sum(e["reward"] for e in episodes) / n,
             mean_progress=sum(e["progress"] for e in episodes) / n,
             lap_completion=sum(e["lap_complete"] for e in episodes) / n,
-            value_loss=losses["value"],
-            surrogate_loss=losses["surrogate"],
-            entropy=losses["entropy"],
+            value_loss=losses.get("value"),
+            surrogate_loss=losses.get("surrogate"),
+            entropy=losses.get("entropy"),
             eval=evaluation,
+            imitation_loss=losses.get("imitation"),
         )
 
 
@@ -87,6 +94,7 @@ def metrics_row(stats: IterationStats) -> dict[str, Any]:
         "value_loss": stats.value_loss,
         "surrogate_loss": stats.surrogate_loss,
         "entropy": stats.entropy,
+        "imitation_loss": stats.imitation_loss,
     }
     return {key: "" if value is None else value for key, value in row.items()}
 

@@ -63,6 +63,12 @@ class TrainSettings(BaseModel):
         description="What PPO's critic reads: privileged (an MLP on track-relative state; "
         "only the actor is exported) or sensors (the actor's network).",
     )
+    teacher: Literal["pursuit"] | None = Field(
+        None,
+        description="Train the actor by imitating this driver instead of by PPO: pursuit "
+        "(pure pursuit on the racing line, steering around boxes and cars; "
+        "agents.imitation). Clone the run to go on with PPO and the reward function.",
+    )
     seed: int = Field(0, description="Random seed.")
     workers: int | None = Field(
         None, description="Worker processes (default: CPU cores; 0: in-process)."

@@ -1,4 +1,5 @@
-"""Train a racing policy with rsl-rl's PPO and write a run in deepracer-for-cloud's layout.
+"""Train a racing policy with rsl-rl's PPO (or by imitation, ``agents.imitation``) and write
+a run in deepracer-for-cloud's layout.
 
 Run layout (``RUN`` = the output folder)::
 
@@ -42,6 +43,7 @@ from agents.checkpoint import (
 from agents.deepracer_metrics import TrainingMetricsLog, write_training_params
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
+from agents.imitation import imitation_config
 from agents.metrics import IterationStats, append_metrics
 from agents.model_metadata import DeepRacerMetadata, write_model_metadata
 from agents.rewards import resolve_reward
@@ -173,7 +175,8 @@ class Trainer:
             num_workers=s.workers,
             learner_cars=learners,
             device=s.device,
-            privileged=s.critic == "privileged",
+            privileged=s.critic == "privileged" and s.teacher is None,
+            expert=s.teacher is not None,
         )
         return env, pool
 
@@ -183,6 +186,8 @@ class Trainer:
             s.preset, s.sensors, s.action_space, s.critic
         )
         cfg = self.hp.to_rsl_rl(env.num_envs, actor, critic, groups, s.steps_per_env)
+        if s.teacher is not None:
+            cfg = imitation_config(cfg, s.discrete)
         log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None
         return RacingRunner(env, cfg, log_dir=log_dir, device=s.device)
 
@@ -194,8 +199,10 @@ class Trainer:
             self.elapsed_before = float(ckpt["elapsed_s"])
         elif self.clone is not None:
             ckpt = read_checkpoint(self.clone, runner.device, model_checkpoint(self.clone))
-            # A critic that reads other inputs than this run's cannot be reused: a fresh one.
+            # A critic that reads other inputs than this run's cannot be reused: a fresh one
+            # (an imitation run has none).
             same_critic = load_settings(self.clone).critic == self.settings.critic
+            same_critic = same_critic and "critic_state_dict" in ckpt
             try:
                 runner.alg.load(ckpt, {"actor": True, "critic": same_critic}, strict=True)
             except RuntimeError as exc:

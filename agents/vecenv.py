@@ -24,6 +24,7 @@ import torch
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from agents.imitation import EXPERT_GROUP, ExpertDriver
 from agents.networks import observation_groups
 from agents.privileged import PRIVILEGED_GROUP, privileged_state
 from agents.rewards import resolve_reward
@@ -73,7 +74,8 @@ class EnvGroup:
     slot count of the whole vec env: a simtrace row's episode is
     ``episode_of_slot * total_slots + global_slot``, unique across groups and increasing
     per slot. ``privileged`` adds the :data:`~agents.privileged.PRIVILEGED_GROUP` to the
-    observations (for a privileged critic).
+    observations (for a privileged critic), ``expert`` the teacher's actions
+    (:data:`~agents.imitation.EXPERT_GROUP`, for imitation).
     """
 
     def __init__(
@@ -86,6 +88,7 @@ class EnvGroup:
         slot_offset: int = 0,
         total_slots: int | None = None,
         privileged: bool = False,
+        expert: bool = False,
     ) -> None:
         config = RaceConfig.from_json(config_json)
         reward_fn = resolve_reward(reward, config.race_type)
@@ -97,9 +100,15 @@ class EnvGroup:
         pairs = [(i, car) for i in range(len(self.envs)) for car in learner_cars]
         self.slots = [_Slot(slot_offset + k, i, car) for k, (i, car) in enumerate(pairs)]
         self.total_slots = total_slots or len(self.slots)
-        self.discrete = isinstance(config.cars[0].action_space, DiscreteActionSpace)
+        space = config.cars[0].action_space
+        self.discrete = isinstance(space, DiscreteActionSpace)
         self.record_simtrace = record_simtrace
         self.privileged = privileged
+        self.experts = (
+            {(s.env, s.car): ExpertDriver(self.envs[s.env].track, space) for s in self.slots}
+            if expert
+            else {}
+        )
         self.rows: list[dict[str, Any]] = []
         self.opponents: dict[int, tuple[str, Any]] = {}
         self.last_obs: dict[tuple[int, str], dict[str, np.ndarray]] = {}
@@ -165,6 +174,8 @@ class EnvGroup:
                     self.last_info[(i, car)] = info
                     if k is not None:
                         self.slots[k].start = env.time
+                        if self.experts:
+                            self.experts[(i, car)].reset()
         return StepBatch(self._stack_obs(), rewards, terminated, truncated, episodes)
 
     def _restart_near(self, env: RacingEnv, car: str) -> tuple[str, float] | None:
@@ -227,6 +238,13 @@ class EnvGroup:
                     for s in self.slots
                 ]
             )
+        if self.experts:
+            groups[EXPERT_GROUP] = np.stack(
+                [
+                    self.experts[(s.env, s.car)].action(self.last_info[(s.env, s.car)]["params"])
+                    for s in self.slots
+                ]
+            )
         return groups
 
     def close(self) -> None:
@@ -271,6 +289,7 @@ class RacingVecEnv(VecEnv):
         record_simtrace: keep per-step simtrace rows (:meth:`drain_simtrace`).
         privileged: add the privileged-state group (``agents.privileged``) to the
             observations, for a critic that reads it.
+        expert: add the teacher's actions (``agents.imitation``), for imitation.
     """
 
     def __init__(
@@ -284,6 +303,7 @@ class RacingVecEnv(VecEnv):
         device: str = "cpu",
         record_simtrace: bool = True,
         privileged: bool = False,
+        expert: bool = False,
     ) -> None:
         if config.mode != "training":
             raise ValueError("RacingVecEnv needs a training-mode race config")
@@ -315,6 +335,7 @@ class RacingVecEnv(VecEnv):
                 "slot_offset": offsets[w],
                 "total_slots": self.num_envs,
                 "privileged": privileged,
+                "expert": expert,
             }
             for w, races in enumerate(self._races_of)
         ]
