@@ -58,6 +58,7 @@ class Recipe:
     reward_fn: str  # bundled sample name
     track: str = "beginner_loop"
     network: str | None = None  # None: the preset by sensors (camera: CPU CNN)
+    teacher: str | None = None  # imitate this driver (agents.imitation) instead of PPO
     workers: int = 2
     # Simulated seconds an evaluation may run: 3 laps of a car worth measuring take well
     # under this, and a car stuck behind a box does not cost minutes of training time.
@@ -75,6 +76,7 @@ RECIPES: dict[str, Recipe] = {
         sensors=("camera",),
         action_space="continuous:-30:30:0.5:4",
         reward_fn="pursuit",
+        teacher="pursuit",
     ),
     "object_avoidance": Recipe(
         race_type="object_avoidance",  # arena.make_config's default section: 6 random boxes
@@ -82,12 +84,14 @@ RECIPES: dict[str, Recipe] = {
         action_space="continuous:-30:30:0.5:4",
         reward_fn="object_avoidance",
         track="slipstream_speedway",  # beginner_loop's 0.76 m leaves a box 0.3 m to pass
+        teacher="pursuit",
     ),
     "head_to_bot": Recipe(
         race_type="head_to_bot",  # arena.make_config's default bots section
         sensors=("camera", "lidar"),
         action_space="continuous:-30:30:0.5:3",
         reward_fn="head_to_head",
+        teacher="pursuit",
     ),
     "head_to_model": Recipe(
         race_type="head_to_model",
@@ -114,6 +118,7 @@ def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None)
         reward_fn=recipe.reward_fn,
         network=recipe.network,
         critic=args.critic,
+        teacher=recipe.teacher,
         workers=workers,
         minutes=args.minutes,
         eval_every=args.eval_every,
