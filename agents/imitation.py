@@ -4,10 +4,11 @@
 instead of PPO (rsl-rl's :class:`~rsl_rl.algorithms.Distillation`): the student drives
 with its own sensors (sampling from its action distribution, so it visits the states
 its mistakes lead to), and in every state the teacher says what it would have done.
-The teacher is :class:`agents.pursuit.PurePursuitPolicy`, pure pursuit on the track's
-racing line at its speed profile: it reads DeepRacer's params, which the student never
-sees. Its actions are computed in the env workers and travel as the observation group
-:data:`EXPERT_GROUP`, which :class:`ExpertModel` hands to rsl-rl as the teacher's output.
+The teacher is :class:`agents.pursuit.PassingPursuitPolicy`, pure pursuit on the track's
+racing line at its speed profile that steers around boxes and cars: it reads DeepRacer's
+params, which the student never sees. Its actions are computed in the env workers and
+travel as the observation group :data:`EXPERT_GROUP`, which :class:`ExpertModel` hands to
+rsl-rl as the teacher's output.
 
 After each rollout the student regresses its action (the Gaussian mean, or the logits
 with cross-entropy for a discrete space) onto the teacher's, over shuffled mini-batches.
@@ -26,6 +27,7 @@ from rsl_rl.algorithms import Distillation
 from tensordict import TensorDict
 
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
+from tracks.track import Track
 
 # The observation group that carries the teacher's action for each learner slot.
 EXPERT_GROUP = "expert"
@@ -43,7 +45,7 @@ class ExpertDriver:
     Continuous spaces: the ``[-1, 1]^2`` action. Discrete spaces: a one-hot row.
     """
 
-    def __init__(self, track: Any, space: DiscreteActionSpace | ContinuousActionSpace) -> None:
+    def __init__(self, track: Track, space: DiscreteActionSpace | ContinuousActionSpace) -> None:
         from agents.pursuit import PassingPursuitPolicy
 
         self.space = space

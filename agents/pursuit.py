@@ -169,9 +169,9 @@ class PassingPursuitPolicy(PurePursuitPolicy):
     :data:`PASS_SPEED`: on the side it is already on when the track has room there, else
     on the far side. A car too close ahead to cross in front of (:data:`CROSS_GAP_M`) is
     followed on this side at its speed until there is room. Off the line by more than
-    :data:`REJOIN_M`, it rejoins the line at most at :data:`PASS_SPEED`. It is the teacher that
-    ``--teacher pursuit`` imitates (``agents.imitation``); with no objects near it drives
-    exactly as :class:`PurePursuitPolicy`.
+    :data:`REJOIN_M`, it rejoins the line at most at :data:`PASS_SPEED`. On the line with
+    no object near it drives as :class:`PurePursuitPolicy`. It is the teacher that
+    ``--teacher pursuit`` imitates (``agents.imitation``).
     """
 
     def __init__(self, track: Track, *args: Any, **kwargs: Any) -> None:
