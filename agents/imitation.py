@@ -26,6 +26,7 @@ import torch.nn as nn
 from rsl_rl.algorithms import Distillation
 from tensordict import TensorDict
 
+from agents.pursuit import PassingPursuitPolicy
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from tracks.track import Track
 
@@ -46,8 +47,6 @@ class ExpertDriver:
     """
 
     def __init__(self, track: Track, space: DiscreteActionSpace | ContinuousActionSpace) -> None:
-        from agents.pursuit import PassingPursuitPolicy
-
         self.space = space
         self.policy = PassingPursuitPolicy(track, space)
 

@@ -107,12 +107,18 @@ class PurePursuitPolicy:
 
     def command(self, x: float, y: float, heading_deg: float, speed: float) -> tuple[float, float]:
         """``(steering_deg, speed)`` for a car whose model point is at ``(x, y)``."""
-        yaw = math.radians(heading_deg)
-        rear = np.array(DEFAULT_CAR.rear_axle(x, y, yaw))
-        distance = self.lookahead + self.lookahead_per_speed * max(speed, 0.0)
+        yaw, rear, distance = self._pursuit_geometry(x, y, heading_deg, speed)
         target, target_speed = self._ahead(rear, distance)
         steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target)
         return steer, float(min(target_speed, self.max_speed))
+
+    def _pursuit_geometry(
+        self, x: float, y: float, heading_deg: float, speed: float
+    ) -> tuple[float, np.ndarray, float]:
+        """The car's yaw (rad), rear-axle point and lookahead distance at ``speed``."""
+        yaw = math.radians(heading_deg)
+        rear = np.array(DEFAULT_CAR.rear_axle(x, y, yaw))
+        return yaw, rear, self.lookahead + self.lookahead_per_speed * max(speed, 0.0)
 
     def _ahead(self, point: np.ndarray, distance: float) -> tuple[np.ndarray, float]:
         """The racing-line point ``distance`` metres past the line point nearest ``point``."""
@@ -191,9 +197,9 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             off_line = abs(_offset(params) - self._line_offset_at(params["projection_distance"]))
             return steer, min(speed, PASS_SPEED) if off_line > REJOIN_M else speed
         offset, most = way
-        yaw = math.radians(params["heading"])
-        rear = np.array(DEFAULT_CAR.rear_axle(params["x"], params["y"], yaw))
-        distance = self.lookahead + self.lookahead_per_speed * min(params["speed"], most)
+        yaw, rear, distance = self._pursuit_geometry(
+            params["x"], params["y"], params["heading"], min(params["speed"], most)
+        )
         arc = float(self.track.project(rear[None]).arc_length[0]) + distance
         target, _ = self.track.pose_at(self.track.wrap_arc_length(arc), offset)
         return pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target), min(speed, most)

@@ -17,6 +17,7 @@ from agents.imitation import EXPERT_GROUP
 from agents.settings import TrainSettings
 from agents.train import Trainer, load_actor
 from agents.vecenv import RacingVecEnv
+from tests.agents.clones import assert_clone_takes_the_actor
 
 CONTINUOUS = parse_action_space_spec("continuous:-30:30:0.5:4")
 DISCRETE = parse_action_space_spec("3x3@1.0")
@@ -119,16 +120,7 @@ def test_an_imitation_run_resumes_and_clones_into_ppo(tmp_path):
     assert torch.load(run / "checkpoints" / "last.pt", weights_only=True)["iteration"] == 1
 
     ppo = Trainer(TrainSettings(**base), tmp_path / "ppo", TINY, clone=run)
-    env, _ = ppo._make_env()
-    try:
-        runner = ppo._make_runner(env)
-        ppo._load_weights(runner)  # the student as the actor, a fresh critic
-        student, _ = load_actor(run)
-        cloned = runner.alg.get_policy().state_dict()
-        for key, value in student.state_dict().items():
-            assert torch.equal(cloned[key], value), key
-    finally:
-        env.close()
+    assert_clone_takes_the_actor(ppo, run)  # the student as the actor, a fresh critic
 
 
 def test_cli_names_the_teachers_it_knows(tmp_path):

@@ -24,11 +24,11 @@ from tracks.raceline import CarLimits, compute_racing_line
 TRACK = "beginner_loop"
 
 
-def _race(spec: str):
+def _race(spec: str, policy_class: type = PurePursuitPolicy):
     track = get_track(TRACK)
     space = parse_action_space_spec(spec)
     config = arena.make_config(track=TRACK, action_space=space, laps=2, sensors=("sector_lidar",))
-    result = run_race(config, {"car0": PurePursuitPolicy(track, space)}, record_trace=False)
+    result = run_race(config, {"car0": policy_class(track, space)}, record_trace=False)
     return result.car("car0"), compute_racing_line(track).lap_time
 
 
@@ -121,10 +121,6 @@ def test_passing_pursuit_races_bots_without_crashing_into_them() -> None:
 def test_passing_pursuit_without_objects_drives_the_racing_line() -> None:
     """With nothing to pass it laps as plain pursuit does (within a step per lap)."""
     plain, _ = _race("continuous:-30:30:0.5:4")
-    track = get_track(TRACK)
-    space = parse_action_space_spec("continuous:-30:30:0.5:4")
-    config = arena.make_config(track=TRACK, action_space=space, laps=2, sensors=("sector_lidar",))
-    result = run_race(config, {"car0": PassingPursuitPolicy(track, space)}, record_trace=False)
-    passing = result.car("car0")
+    passing, _ = _race("continuous:-30:30:0.5:4", PassingPursuitPolicy)
     assert passing.off_track_count == 0
     assert passing.lap_times == pytest.approx(plain.lap_times, abs=1.0 / 15)

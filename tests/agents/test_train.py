@@ -23,6 +23,7 @@ from agents.selfplay import read_policy_graph
 from agents.settings import TrainSettings, load_settings, settings_path
 from agents.train import Trainer, load_actor
 from agents.vecenv import RacingVecEnv
+from tests.agents.clones import assert_clone_takes_the_actor
 
 SPACE = parse_action_space_spec("3x3@1.0")
 TINY = Hyperparameters(num_episodes_between_training=2, num_epochs=2, batch_size=64)
@@ -97,18 +98,9 @@ def test_ppo_beats_a_random_policy(tmp_path):
 
 def test_clone_with_changed_speed_range(tmp_path):
     Trainer(_settings(iterations=1), tmp_path / "a", TINY).run()
-    trained, _ = load_actor(tmp_path / "a")
     faster = _settings(iterations=1, action_space=parse_action_space_spec("3x3@2.0"))
     trainer = Trainer(faster, tmp_path / "b", TINY, clone=tmp_path / "a")
-    env, _ = trainer._make_env()
-    try:
-        runner = trainer._make_runner(env)
-        trainer._load_weights(runner)
-        cloned = runner.alg.get_policy().state_dict()
-        for key, value in trained.state_dict().items():
-            assert torch.equal(cloned[key], value), key
-    finally:
-        env.close()
+    assert_clone_takes_the_actor(trainer, tmp_path / "a")
     other = _settings(iterations=1, action_space=parse_action_space_spec("5x2@2.0"))
     trainer = Trainer(other, tmp_path / "c", TINY, clone=tmp_path / "a")
     with pytest.raises(ValueError, match="cannot clone"):
@@ -131,16 +123,8 @@ def test_a_privileged_critic_trains_resumes_clones_and_exports_a_sensor_only_mod
 
     Trainer(_settings(iterations=1, critic="sensors"), tmp_path / "sensors", TINY).run()
     trainer = Trainer(privileged, tmp_path / "clone", TINY, clone=tmp_path / "sensors")
-    env, _ = trainer._make_env()
-    try:
-        runner = trainer._make_runner(env)
-        trainer._load_weights(runner)  # the actor only: the parent's critic reads lidar
-        parent, _ = load_actor(tmp_path / "sensors")
-        cloned = runner.alg.get_policy().state_dict()
-        for key, value in parent.state_dict().items():
-            assert torch.equal(cloned[key], value), key
-    finally:
-        env.close()
+    # the actor only: the parent's critic reads lidar
+    assert_clone_takes_the_actor(trainer, tmp_path / "sensors")
 
 
 def test_a_run_stored_before_the_critic_setting_resumes_with_its_sensor_critic(tmp_path):
