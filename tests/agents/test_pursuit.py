@@ -22,6 +22,7 @@ from tracks.catalog import get_track
 from tracks.raceline import CarLimits, compute_racing_line
 
 TRACK = "beginner_loop"
+SPEEDWAY = "slipstream_speedway"
 
 
 def _race(spec: str, policy_class: type = PurePursuitPolicy):
@@ -38,6 +39,36 @@ def test_continuous_two_clean_laps_near_the_physical_limit() -> None:
     assert car.off_track_count == 0 and car.crash_count == 0
     # the first lap includes the standing start; a flying lap stays within 25 % of the limit
     assert car.lap_times[1] < 1.25 * limit
+
+
+def test_noisy_time_trials_stay_on_the_road_near_the_limit() -> None:
+    """Ten seeded 3-lap races with the races' actuation noise: no off-track, every best lap
+    within 1.1x of the physical limit (measured 1.05-1.06x; with the profile planned at
+    the car's grip and no arc cap it was 1.11x with an off-track in one race in 20)."""
+    track = get_track(TRACK)
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    limit = compute_racing_line(track).lap_time
+    for seed in range(10):
+        config = arena.make_config(track=TRACK, action_space=space, laps=3, seed=seed)
+        car = run_race(config, {"car0": PurePursuitPolicy(track, space)}, record_trace=False)
+        result = car.car("car0")
+        assert result.laps == 3 and result.off_track_count == 0, seed
+        assert result.best_lap < 1.1 * limit, seed
+
+
+def test_speed_on_a_tight_arc_is_held_to_the_cars_grip() -> None:
+    """Well off the line (as after a pass) the car steers a tight arc back: the speed it
+    asks for is what the grip allows on that arc, below the line's planned speed."""
+    policy = PurePursuitPolicy(get_track(TRACK), continuous_action_space())
+    fastest = int(np.argmax(policy.planned_speed))
+    point, ahead = policy.line.points[fastest], policy.line.points[fastest + 1]
+    yaw = math.atan2(*(ahead - point)[::-1])
+    aside = point + 0.3 * np.array([math.sin(yaw), -math.cos(yaw)])  # right of the line
+    steer, speed = policy.command(aside[0], aside[1], math.degrees(yaw), 0.5)
+    bend = math.tan(math.radians(abs(steer))) / DEFAULT_CAR.wheelbase
+    assert steer > 10.0
+    assert speed**2 * bend == pytest.approx(DEFAULT_LIMITS.max_lateral_accel)
+    assert speed < policy.planned_speed[fastest]
 
 
 def test_discrete_beginner_space_two_clean_laps() -> None:
@@ -99,18 +130,21 @@ def _race_with_objects(policy_class: type, track: str, race_type: str, seed: int
     return run_race(config, {"car0": policy}, record_trace=False).car("car0")
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_passing_pursuit_steers_around_the_boxes_the_plain_one_hits(seed) -> None:
-    """Six boxes on the speedway: plain pursuit drives into them; the passing driver laps
-    clean within 1.45x of the physical limit (1.37x measured)."""
-    plain = _race_with_objects(PurePursuitPolicy, "slipstream_speedway", "object_avoidance", seed)
-    passing = _race_with_objects(
-        PassingPursuitPolicy, "slipstream_speedway", "object_avoidance", seed
-    )
-    assert plain.crash_count >= 3
-    assert passing.laps == 3 and passing.crash_count == 0 and passing.off_track_count == 0
-    limit = compute_racing_line(get_track("slipstream_speedway")).lap_time
-    assert passing.best_lap < 1.45 * limit
+def test_passing_pursuit_steers_around_the_boxes_the_plain_one_hits() -> None:
+    """Six boxes on the speedway, five seeded races (with the races' actuation noise):
+    plain pursuit drives into them and finishes no lap; the passing driver finishes every
+    race with at most one incident in its 15 laps, its median best lap within 1.55x of the
+    physical limit (measured: no box hit, one off-track, 1.46x)."""
+    seeds = range(5)
+    plain = [_race_with_objects(PurePursuitPolicy, SPEEDWAY, "object_avoidance", s) for s in seeds]
+    passing = [
+        _race_with_objects(PassingPursuitPolicy, SPEEDWAY, "object_avoidance", s) for s in seeds
+    ]
+    assert all(car.crash_count >= 3 and car.laps == 0 for car in plain)
+    assert all(car.laps == 3 for car in passing)
+    assert sum(car.crash_count + car.off_track_count for car in passing) <= 1
+    limit = compute_racing_line(get_track(SPEEDWAY)).lap_time
+    assert np.median([car.best_lap for car in passing]) < 1.55 * limit
 
 
 def test_passing_pursuit_races_bots_without_crashing_into_them() -> None:

@@ -1,0 +1,122 @@
+"""The passing pursuit driver (the imitation teacher) in seeded races: how fast, how clean.
+
+Races :class:`agents.pursuit.PassingPursuitPolicy` with the races' actuation noise and
+start jitter (``arena.config.SeedVariation``; training has neither), ``--seeds`` seeded
+3-lap races per case, and prints one table: time trial on ``beginner_loop``, object
+avoidance on ``slipstream_speedway`` (6 random boxes), head to bot on ``beginner_loop``
+(the default bots) and, with ``--rival MODEL.zip``, head to model against that model
+(the driver takes the model's slot on odd seeds; the grid is drawn per seed). Columns:
+the driver's off-tracks and collisions over all races, the median best lap and its
+ratio to the physical-limit lap, and against the rival its wins and the rival's own
+off-tracks and collisions. One process, no training.
+
+Run::
+
+    .venv/bin/python benchmarks/pursuit_races.py --seeds 10
+    .venv/bin/python benchmarks/pursuit_races.py --seeds 20 \
+        --rival league/demo_models/sample-time-trial.zip
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+import arena
+from agents.action_spaces import parse_action_space_spec
+from agents.pursuit import PassingPursuitPolicy
+from agents.selfplay import opponent_policy, read_policy_graph
+from arena.race import RaceResult, run_race
+from tracks.catalog import get_track
+from tracks.raceline import compute_racing_line
+
+SPACE = "continuous:-30:30:0.5:4"
+LAPS = 3
+CASES = (  # (race type, track)
+    ("time_trial", "beginner_loop"),
+    ("object_avoidance", "slipstream_speedway"),
+    ("head_to_bot", "beginner_loop"),
+)
+RIVAL_TRACK = "beginner_loop"  # the rival reads the camera, as the sample models do
+
+
+def race(race_type: str, track: str, seed: int, rival: bytes | None = None) -> RaceResult:
+    """One seeded race of the driver (``car0`` on even seeds), alone or against ``rival``."""
+    space = parse_action_space_spec(SPACE)
+    config = arena.make_config(
+        track=track,
+        race_type=race_type,
+        action_space=space,
+        laps=LAPS,
+        seed=seed,
+        time_limit_s=60,
+        num_cars=None if rival is None else 2,
+        sensors=("camera",) if rival is not None else ("sector_lidar",),  # the rival's eyes
+    )
+    driver = PassingPursuitPolicy(get_track(track), space)
+    if rival is None:
+        return run_race(config, {"car0": driver}, record_trace=False)
+    me, other = ("car0", "car1") if seed % 2 == 0 else ("car1", "car0")
+    policies = {me: driver, other: opponent_policy(rival, discrete=False, name="rival")}
+    return run_race(config, policies, record_trace=False)
+
+
+def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> list[str]:
+    """One table row: ``seeds`` races of one case."""
+    incidents = rival_incidents = wins = 0
+    best = []
+    for seed in range(seeds):
+        result = race(race_type, track, seed, rival)
+        me = "car0" if rival is None or seed % 2 == 0 else "car1"
+        car = result.car(me)
+        incidents += car.off_track_count + car.crash_count
+        best.append(car.best_lap if car.best_lap is not None else float("inf"))
+        if rival is not None:
+            other = result.car("car1" if me == "car0" else "car0")
+            rival_incidents += other.off_track_count + other.crash_count
+            wins += result.finish_order.index(me) < result.finish_order.index(other.name)
+    median = statistics.median(best)
+    limit = compute_racing_line(get_track(track)).lap_time
+    against = [f"{wins / seeds:.0%}", str(rival_incidents)] if rival is not None else ["-", "-"]
+    return [
+        race_type,
+        track,
+        str(seeds),
+        str(incidents),
+        f"{median:.2f}",
+        f"{median / limit:.2f}",
+    ] + against
+
+
+def main() -> None:
+    """Race every case and print the table."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seeds", type=int, default=10, help="seeded races per case")
+    parser.add_argument("--rival", type=Path, help="a submission zip to race head to model")
+    args = parser.parse_args()
+    table = Table(title=f"passing pursuit driver, {LAPS}-lap seeded races ({SPACE})")
+    columns = (
+        "race type",
+        "track",
+        "races",
+        "off-tracks + collisions",
+        "median best lap (s)",
+        "/ limit",
+        "wins vs rival",
+        "rival's off-tracks + collisions",
+    )
+    for column in columns:
+        table.add_column(column)
+    for race_type, track in CASES:
+        table.add_row(*row(race_type, track, args.seeds))
+    if args.rival is not None:
+        table.add_row(*row("head_to_model", RIVAL_TRACK, args.seeds, read_policy_graph(args.rival)))
+    Console(width=200).print(table)
+
+
+if __name__ == "__main__":
+    main()
