@@ -98,6 +98,7 @@ RECIPES: dict[str, Recipe] = {
         sensors=("camera",),  # the parent's: a clone needs the same sensors and preset
         action_space="continuous:-30:30:0.5:4",  # the parent's number of actions
         reward_fn="head_to_head",
+        teacher="pursuit",  # the passing teacher, racing the pool from behind
         parent="time_trial",
         selfplay="pool",
     ),
