@@ -169,7 +169,8 @@ PASS_BESIDE_M = 0.45
 # Centre-to-centre lateral distance kept from an object: half its width (a box 0.25 m, a
 # car 0.1 m; the params do not say which, so an object moving faster than MOVING_MPS is
 # taken for a car), half the car's (0.1 m) and a margin; and the margin kept from the
-# track's edge. (Boxes at 0.45 m: 7 box hits in 10 noisy 3-lap speedway races; at 0.5: 1.)
+# track's edge. (With the arc cap, boxes at 0.45 m: 7 box hits in 10 noisy 3-lap speedway
+# races; at 0.5 m: 1.)
 BOX_CLEARANCE_M = 0.5
 CAR_CLEARANCE_M = 0.32
 MOVING_MPS = 0.1

@@ -60,9 +60,14 @@ def race(race_type: str, track: str, seed: int, rival: bytes | None = None) -> R
     driver = PassingPursuitPolicy(get_track(track), space)
     if rival is None:
         return run_race(config, {"car0": driver}, record_trace=False)
-    me, other = ("car0", "car1") if seed % 2 == 0 else ("car1", "car0")
+    me, other = driver_slots(seed)
     policies = {me: driver, other: opponent_policy(rival, discrete=False, name="rival")}
     return run_race(config, policies, record_trace=False)
+
+
+def driver_slots(seed: int) -> tuple[str, str]:
+    """``(the driver's car, the rival's)`` in the race of ``seed``."""
+    return ("car0", "car1") if seed % 2 == 0 else ("car1", "car0")
 
 
 def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> list[str]:
@@ -71,14 +76,14 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
     best = []
     for seed in range(seeds):
         result = race(race_type, track, seed, rival)
-        me = "car0" if rival is None or seed % 2 == 0 else "car1"
+        me, other = driver_slots(seed) if rival is not None else ("car0", "")
         car = result.car(me)
         incidents += car.off_track_count + car.crash_count
         best.append(car.best_lap if car.best_lap is not None else float("inf"))
         if rival is not None:
-            other = result.car("car1" if me == "car0" else "car0")
-            rival_incidents += other.off_track_count + other.crash_count
-            wins += result.finish_order.index(me) < result.finish_order.index(other.name)
+            opponent = result.car(other)
+            rival_incidents += opponent.off_track_count + opponent.crash_count
+            wins += result.finish_order.index(me) < result.finish_order.index(other)
     median = statistics.median(best)
     limit = compute_racing_line(get_track(track)).lap_time
     against = [f"{wins / seeds:.0%}", str(rival_incidents)] if rival is not None else ["-", "-"]
