@@ -18,7 +18,7 @@ import numpy as np
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.car_spec import DEFAULT_CAR, CarSpec
 from arena.drivers import nearest_action, pursuit_steering
-from tracks.raceline import CarLimits, RacingLine, compute_racing_line
+from tracks.raceline import CarLimits, RacingLine, compute_racing_line, profile_path
 from tracks.track import Track
 
 
@@ -81,7 +81,10 @@ class PurePursuitPolicy:
         self.space = action_space
         self.line = racing_line_for(track, limits)
         planning = replace(limits, max_lateral_accel=PROFILE_GRIP * limits.max_lateral_accel)
-        self.planned_speed = racing_line_for(track, planning).speed  # same path, faster profile
+        # The same line, its speed profile planned with more grip.
+        self.planned_speed = profile_path(
+            self.line.points, planning, is_loop=self.line.is_loop
+        ).speed
         self.arc_grip = ARC_GRIP * limits.max_lateral_accel
         self.lookahead = lookahead
         self.lookahead_per_speed = lookahead_per_speed
