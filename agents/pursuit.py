@@ -17,6 +17,7 @@ import numpy as np
 
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.car_spec import DEFAULT_CAR, CarSpec
+from arena.config import PhysicsConfig
 from arena.drivers import nearest_action, pursuit_steering
 from tracks.raceline import CarLimits, RacingLine, compute_racing_line, profile_path
 from tracks.track import Track
@@ -202,7 +203,7 @@ FOLLOW_ABOVE_MPS = 1.2
 FOLLOW_GAP_M = 0.55
 FOLLOW_GAIN = 3.0
 FOLLOW_MIN_GAP_M = 0.35
-FOLLOW_REACTION_S = 1.0 / 15.0  # one control step at DeepRacer's 15 Hz
+FOLLOW_REACTION_S = 1.0 / PhysicsConfig().control_hz  # one control step (DeepRacer's 15 Hz)
 
 
 class PassingPursuitPolicy(PurePursuitPolicy):
@@ -237,7 +238,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             off_line = abs(_offset(params) - self._line_offset_at(params["projection_distance"]))
             return steer, min(speed, PASS_SPEED) if off_line > REJOIN_M else speed
         offset, most = way
-        if offset is None:  # following a car as fast as this one, on the racing line
+        if offset is None:  # following a racing car, on the racing line
             return steer, min(speed, most)
         yaw, rear, distance = self._pursuit_geometry(
             params["x"], params["y"], params["heading"], min(params["speed"], most)
