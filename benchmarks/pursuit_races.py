@@ -28,11 +28,10 @@ from rich.table import Table
 
 import arena
 from agents.action_spaces import parse_action_space_spec
-from agents.pursuit import PassingPursuitPolicy
+from agents.pursuit import PassingPursuitPolicy, racing_line_for
 from agents.selfplay import opponent_policy, read_policy_graph
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track
-from tracks.raceline import compute_racing_line
 
 SPACE = "continuous:-30:30:0.5:4"
 LAPS = 3
@@ -85,7 +84,7 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
             rival_incidents += opponent.off_track_count + opponent.crash_count
             wins += result.finish_order.index(me) < result.finish_order.index(other)
     median = statistics.median(best)
-    limit = compute_racing_line(get_track(track)).lap_time
+    limit = racing_line_for(get_track(track)).lap_time  # the line the driver follows
     against = [f"{wins / seeds:.0%}", str(rival_incidents)] if rival is not None else ["-", "-"]
     return [
         race_type,
