@@ -16,6 +16,7 @@ import signal
 import threading
 import time
 import traceback
+from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,8 +35,13 @@ from arena.env import RacingEnv
 from arena.params import RewardRaised
 from arena.simtrace import simtrace_row, step_facts
 
-# Head to model: how far behind a rival a restarted learner starts (and ahead of a learner
-# a restarted opponent starts), metres along the track, in the other lane.
+# Head to model: how far from a racing rival a restarted car starts, metres along the track,
+# in the other lane. A learner restarts behind its rival and ahead of it in turn (an
+# opponent the other way round), so that it practises both following and leading at its
+# own pace: restarted behind every time, the learner cloned from a time-trial model saw
+# clear track so rarely that it forgot how to drive it fast (runs/rq16 in
+# docs/training.md, "Recipes per race type": 5.7-5.9 s laps when leading, 5.4-5.5 s
+# following).
 PASS_GAP_M = 1.0
 
 
@@ -113,6 +119,7 @@ class EnvGroup:
         self.opponents: dict[int, tuple[str, Any]] = {}
         self.last_obs: dict[tuple[int, str], dict[str, np.ndarray]] = {}
         self.last_info: dict[tuple[int, str], dict[str, Any]] = {}
+        self.restarts: Counter[tuple[int, str]] = Counter()
 
     def reset(self) -> StepBatch:
         """Reset every race; returns the first observations."""
@@ -169,7 +176,7 @@ class EnvGroup:
                     if term[car] or trunc[car]:
                         episodes.append(self._episode_stats(i, car, slot, infos[car]))
                 if term[car] or trunc[car]:
-                    first, info = env.restart_car(car, self._restart_near(env, car))
+                    first, info = env.restart_car(car, self._restart_near(i, car))
                     self.last_obs[(i, car)] = first
                     self.last_info[(i, car)] = info
                     if k is not None:
@@ -178,17 +185,21 @@ class EnvGroup:
                             self.experts[(i, car)].reset()
         return StepBatch(self._stack_obs(), rewards, terminated, truncated, episodes)
 
-    def _restart_near(self, env: RacingEnv, car: str) -> tuple[str, float] | None:
-        """Where a head-to-model race restarts ``car`` (``RacingEnv.restart_car``'s
-        ``near``): a learner :data:`PASS_GAP_M` behind a racing rival, an opponent as far
-        ahead of a racing learner, so that learners practise passing. Else None."""
+    def _restart_near(self, i: int, car: str) -> tuple[str, float] | None:
+        """Where head-to-model race ``i`` restarts ``car`` (``RacingEnv.restart_car``'s
+        ``near``), :data:`PASS_GAP_M` from a racing rival: a learner behind it on its
+        first restart, ahead of it on the next and so on, an opponent the other way round
+        (ahead of a learner first). Else None."""
+        env = self.envs[i]
         if env.config.race_type != "head_to_model":
             return None
         learner = car in self.learners
         rivals = [c for c in env.agents if c != car and (learner or c in self.learners)]
         if not rivals:
             return None
-        return (rivals[0], -PASS_GAP_M if learner else PASS_GAP_M)
+        behind = (self.restarts[(i, car)] % 2 == 0) == learner
+        self.restarts[(i, car)] += 1
+        return (rivals[0], -PASS_GAP_M if behind else PASS_GAP_M)
 
     def _action(
         self, i: int, car: str, actions: np.ndarray, slot_of: dict[tuple[int, str], int]
