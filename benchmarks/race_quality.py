@@ -10,8 +10,9 @@ of the simulated car, ``agents.pursuit.car_limits`` + ``tracks.raceline``, as
 evaluation of the packed model (the run's best evaluation, whose weights ``model.zip``
 holds). ``head_to_model`` starts from the time-trial run
 (``clone``), trains against a pool of its own snapshots plus the time-trial model, and
-then races the time-trial parent :data:`H2M_RACES` seeded times: win rate, overtakes and
-at-fault collisions per race (the learner's, ``arena.racing_metrics``).
+then races the time-trial parent :data:`H2M_RACES` seeded times: win rate (and the wins
+of the races it started in front and behind), overtakes and at-fault collisions per race
+(the learner's, ``arena.racing_metrics``).
 
 Run::
 
@@ -31,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args
 
+import numpy as np
 from rich.console import Console
 from rich.table import Table
 
@@ -46,6 +48,7 @@ from agents.train import Trainer, TrainResult, run_hyperparameters
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
+from tracks.track import Track
 
 
 @dataclass(frozen=True)
@@ -189,15 +192,21 @@ def physical_limit_lap(track: str) -> float:
 def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[str, float]:
     """Race the learner's and the parent's greedy policies ``races`` seeded times.
 
-    Both drive their packed ``model.zip`` graphs (what a league race would run). The grid
-    alternates: the learner starts in ``car0`` (the front slot) on even seeds and in
-    ``car1`` on odd ones. A win is finishing ahead (``RaceResult.finish_order``).
+    Both drive their packed ``model.zip`` graphs (what a league race would run). The
+    learner drives ``car0`` on even seeds and ``car1`` on odd ones; the seed draws which
+    grid slot each car takes. A win is finishing ahead (``RaceResult.finish_order``);
+    ``ahead_wins`` and ``behind_wins`` (``"won/raced"``) split the races by which car
+    started in front: laps are timed from each car's own slot, so a car that does not
+    get past wins from behind only by ending the race closer to the leader than it
+    started.
     """
     s = load_settings(run_dir)
     parent = load_settings(parent_dir)
     learner_graph = read_policy_graph(run_dir / "model" / "model.zip")
     parent_graph = read_policy_graph(parent_zip(parent_dir))
+    track = get_track(s.track)
     wins = overtakes = at_fault = 0
+    split = {True: [0, 0], False: [0, 0]}  # started ahead? -> [wins, races]
     for seed in range(races):
         config = evaluate.evaluation_config(
             s.track,
@@ -216,16 +225,29 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
             learner_car: opponent_policy(learner_graph, s.discrete, name="learner"),
             parent_car: opponent_policy(parent_graph, parent.discrete, name="parent"),
         }
-        race: RaceResult = run_race(config, policies, record_trace=False)
+        race: RaceResult = run_race(config, policies, record_trace=True)
         learner = race.car(learner_car)
-        wins += race.finish_order.index(learner_car) < race.finish_order.index(parent_car)
+        won = race.finish_order.index(learner_car) < race.finish_order.index(parent_car)
+        tally = split[started_ahead(race, track, learner_car, parent_car)]
+        tally[0] += won
+        tally[1] += 1
+        wins += won
         overtakes += learner.overtakes
         at_fault += learner.at_fault_collisions
     return {
         "win_rate": wins / races,
+        "ahead_wins": "{}/{}".format(*split[True]),
+        "behind_wins": "{}/{}".format(*split[False]),
         "overtakes": overtakes / races,
         "at_fault": at_fault / races,
     }
+
+
+def started_ahead(race: RaceResult, track: Track, car: str, other: str) -> bool:
+    """Whether ``car`` started in front of ``other`` (from the trace's first poses)."""
+    first = [(race.trace[c]["x"][0], race.trace[c]["y"][0]) for c in (car, other)]
+    arc = track.project(np.asarray(first)).arc_length
+    return float(track.arc_delta(arc[1], arc[0])) > 0.0
 
 
 def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namespace) -> dict:
@@ -266,6 +288,8 @@ COLUMNS = (
     ("model eval off-tracks", "off_track", "{}"),
     ("model eval collisions", "collisions", "{}"),
     ("win rate vs parent", "win_rate", "{:.0%}"),
+    ("wins from ahead", "ahead_wins", "{}"),
+    ("wins from behind", "behind_wins", "{}"),
     ("overtakes / race", "overtakes", "{:.2f}"),
     ("at-fault collisions / race", "at_fault", "{:.2f}"),
 )
