@@ -7,8 +7,9 @@ avoidance on ``slipstream_speedway`` (6 random boxes), head to bot on ``beginner
 (the default bots) and, with ``--rival MODEL.zip``, head to model against that model
 (the driver takes the model's slot on odd seeds; the grid is drawn per seed). Columns:
 the driver's off-tracks and collisions over all races, the median best lap and its
-ratio to the physical-limit lap, and against the rival its wins and the rival's own
-off-tracks and collisions. One process, no training.
+ratio to the physical-limit lap, and against the rival its wins (also split by which car
+started in front, as ``race_quality.py`` does) and the rival's own off-tracks and
+collisions. One process, no training.
 
 Run::
 
@@ -23,6 +24,7 @@ import argparse
 import statistics
 from pathlib import Path
 
+from race_quality import started_ahead  # this folder's: the scripts run from it
 from rich.console import Console
 from rich.table import Table
 
@@ -61,7 +63,7 @@ def race(race_type: str, track: str, seed: int, rival: bytes | None = None) -> R
         return run_race(config, {"car0": driver}, record_trace=False)
     me, other = driver_slots(seed)
     policies = {me: driver, other: opponent_policy(rival, discrete=False, name="rival")}
-    return run_race(config, policies, record_trace=False)
+    return run_race(config, policies, record_trace=True)  # the trace says who started ahead
 
 
 def driver_slots(seed: int) -> tuple[str, str]:
@@ -72,6 +74,7 @@ def driver_slots(seed: int) -> tuple[str, str]:
 def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> list[str]:
     """One table row: ``seeds`` races of one case."""
     incidents = rival_incidents = wins = 0
+    split = {True: [0, 0], False: [0, 0]}  # the driver started ahead? -> [wins, races]
     best = []
     for seed in range(seeds):
         result = race(race_type, track, seed, rival)
@@ -82,10 +85,19 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
         if rival is not None:
             opponent = result.car(other)
             rival_incidents += opponent.off_track_count + opponent.crash_count
-            wins += result.finish_order.index(me) < result.finish_order.index(other)
+            won = result.finish_order.index(me) < result.finish_order.index(other)
+            tally = split[started_ahead(result, get_track(track), me, other)]
+            tally[0] += won
+            tally[1] += 1
+            wins += won
     median = statistics.median(best)
     limit = racing_line_for(get_track(track)).lap_time  # the line the driver follows
-    against = [f"{wins / seeds:.0%}", str(rival_incidents)] if rival is not None else ["-", "-"]
+    against = (
+        [f"{wins / seeds:.0%}", "{}/{}".format(*split[True]), "{}/{}".format(*split[False])]
+        + [str(rival_incidents)]
+        if rival is not None
+        else ["-"] * 4
+    )
     return [
         race_type,
         track,
@@ -111,6 +123,8 @@ def main() -> None:
         "median best lap (s)",
         "/ limit",
         "wins vs rival",
+        "wins from ahead",
+        "wins from behind",
         "rival's off-tracks + collisions",
     )
     for column in columns:
