@@ -40,7 +40,7 @@ from arena.simtrace import simtrace_row, step_facts
 # opponent the other way round), so that it practises both following and leading at its
 # own pace: restarted behind every time, the learner cloned from a time-trial model saw
 # clear track so rarely that it forgot how to drive it fast (runs/rq16 in
-# docs/training.md, "Recipes per race type": 5.7-5.9 s laps when leading, 5.4-5.5 s
+# docs/training.md, "Recipes per race type": 5.7-6.0 s laps when leading, 5.5-5.7 s
 # following).
 PASS_GAP_M = 1.0
 
@@ -119,7 +119,7 @@ class EnvGroup:
         self.opponents: dict[int, tuple[str, Any]] = {}
         self.last_obs: dict[tuple[int, str], dict[str, np.ndarray]] = {}
         self.last_info: dict[tuple[int, str], dict[str, Any]] = {}
-        self.restarts: Counter[tuple[int, str]] = Counter()
+        self.restarts: Counter[tuple[int, str]] = Counter()  # restarts near a rival
 
     def reset(self) -> StepBatch:
         """Reset every race; returns the first observations."""
