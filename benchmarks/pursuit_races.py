@@ -92,12 +92,10 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
             wins += won
     median = statistics.median(best)
     limit = racing_line_for(get_track(track)).lap_time  # the line the driver follows
-    against = (
-        [f"{wins / seeds:.0%}", "{}/{}".format(*split[True]), "{}/{}".format(*split[False])]
-        + [str(rival_incidents)]
-        if rival is not None
-        else ["-"] * 4
-    )
+    against = ["-"] * 4
+    if rival is not None:
+        ahead, behind = ("{}/{}".format(*split[started]) for started in (True, False))
+        against = [f"{wins / seeds:.0%}", ahead, behind, str(rival_incidents)]
     return [
         race_type,
         track,
