@@ -24,7 +24,7 @@ import argparse
 import statistics
 from pathlib import Path
 
-from race_quality import started_ahead  # this folder's: the scripts run from it
+from race_quality import StartSplit  # this folder's: the scripts run from it
 from rich.console import Console
 from rich.table import Table
 
@@ -73,8 +73,9 @@ def driver_slots(seed: int) -> tuple[str, str]:
 
 def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> list[str]:
     """One table row: ``seeds`` races of one case."""
+    course = get_track(track)
     incidents = rival_incidents = wins = 0
-    split = {True: [0, 0], False: [0, 0]}  # the driver started ahead? -> [wins, races]
+    split = StartSplit()
     best = []
     for seed in range(seeds):
         result = race(race_type, track, seed, rival)
@@ -85,17 +86,13 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
         if rival is not None:
             opponent = result.car(other)
             rival_incidents += opponent.off_track_count + opponent.crash_count
-            won = result.finish_order.index(me) < result.finish_order.index(other)
-            tally = split[started_ahead(result, get_track(track), me, other)]
-            tally[0] += won
-            tally[1] += 1
-            wins += won
+            wins += split.add(result, course, me, other)
     median = statistics.median(best)
-    limit = racing_line_for(get_track(track)).lap_time  # the line the driver follows
+    limit = racing_line_for(course).lap_time  # the line the driver follows
     against = ["-"] * 4
     if rival is not None:
-        ahead, behind = ("{}/{}".format(*split[started]) for started in (True, False))
-        against = [f"{wins / seeds:.0%}", ahead, behind, str(rival_incidents)]
+        against = [f"{wins / seeds:.0%}", split.cell(True), split.cell(False)]
+        against.append(str(rival_incidents))
     return [
         race_type,
         track,

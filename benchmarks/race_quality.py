@@ -206,7 +206,7 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
     parent_graph = read_policy_graph(parent_zip(parent_dir))
     track = get_track(s.track)
     wins = overtakes = at_fault = 0
-    split = {True: [0, 0], False: [0, 0]}  # started ahead? -> [wins, races]
+    split = StartSplit()
     for seed in range(races):
         config = evaluate.evaluation_config(
             s.track,
@@ -227,17 +227,13 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
         }
         race: RaceResult = run_race(config, policies, record_trace=True)
         learner = race.car(learner_car)
-        won = race.finish_order.index(learner_car) < race.finish_order.index(parent_car)
-        tally = split[started_ahead(race, track, learner_car, parent_car)]
-        tally[0] += won
-        tally[1] += 1
-        wins += won
+        wins += split.add(race, track, learner_car, parent_car)
         overtakes += learner.overtakes
         at_fault += learner.at_fault_collisions
     return {
         "win_rate": wins / races,
-        "ahead_wins": "{}/{}".format(*split[True]),
-        "behind_wins": "{}/{}".format(*split[False]),
+        "ahead_wins": split.cell(ahead=True),
+        "behind_wins": split.cell(ahead=False),
         "overtakes": overtakes / races,
         "at_fault": at_fault / races,
     }
@@ -248,6 +244,25 @@ def started_ahead(race: RaceResult, track: Track, car: str, other: str) -> bool:
     first = [(race.trace[c]["x"][0], race.trace[c]["y"][0]) for c in (car, other)]
     arc = track.project(np.asarray(first)).arc_length
     return float(track.arc_delta(arc[1], arc[0])) > 0.0
+
+
+@dataclass
+class StartSplit:
+    """One car's two-car races against another, ``[wins, races]`` by who started in front."""
+
+    tallies: dict[bool, list[int]] = field(default_factory=lambda: {True: [0, 0], False: [0, 0]})
+
+    def add(self, race: RaceResult, track: Track, car: str, other: str) -> bool:
+        """Count ``race`` (it needs its trace); whether ``car`` finished ahead of ``other``."""
+        won = race.finish_order.index(car) < race.finish_order.index(other)
+        tally = self.tallies[started_ahead(race, track, car, other)]
+        tally[0] += won
+        tally[1] += 1
+        return won
+
+    def cell(self, ahead: bool) -> str:
+        """``"won/raced"`` of the races ``car`` started in front (``ahead``) or behind."""
+        return "{}/{}".format(*self.tallies[ahead])
 
 
 def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namespace) -> dict:
