@@ -5,11 +5,12 @@ start jitter (``arena.config.SeedVariation``; training has neither), ``--seeds``
 3-lap races per case, and prints one table: time trial on ``beginner_loop``, object
 avoidance on ``slipstream_speedway`` (6 random boxes), head to bot on ``beginner_loop``
 (the default bots) and, with ``--rival MODEL.zip``, head to model against that model
-(the driver takes the model's slot on odd seeds; the grid is drawn per seed). Columns:
-the driver's off-tracks and collisions over all races, the median best lap and its
-ratio to the physical-limit lap, and against the rival its wins (also split by which car
-started in front, as ``race_quality.py`` does) and the rival's own off-tracks and
-collisions. One process, no training.
+(the driver takes the model's slot on odd seeds; the grid is drawn per seed) on
+``--rival-track``, the track the model learned (default ``beginner_loop``, the sample
+models'). Columns: the driver's off-tracks and collisions over all races, the median
+best lap and its ratio to the physical-limit lap, and against the rival its wins (also
+split by which car started in front, as ``race_quality.py`` does) and the rival's own
+off-tracks and collisions. One process, no training.
 
 Run::
 
@@ -33,7 +34,7 @@ from agents.action_spaces import parse_action_space_spec
 from agents.pursuit import PassingPursuitPolicy, racing_line_for
 from agents.selfplay import opponent_policy, read_policy_graph
 from arena.race import RaceResult, run_race
-from tracks.catalog import get_track
+from tracks.catalog import TrackNotFoundError, get_track
 
 SPACE = "continuous:-30:30:0.5:4"
 LAPS = 3
@@ -42,7 +43,6 @@ CASES = (  # (race type, track)
     ("object_avoidance", "slipstream_speedway"),
     ("head_to_bot", "beginner_loop"),
 )
-RIVAL_TRACK = "beginner_loop"  # the rival reads the camera, as the sample models do
 
 
 def race(race_type: str, track: str, seed: int, rival: bytes | None = None) -> RaceResult:
@@ -108,7 +108,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=10, help="seeded races per case")
     parser.add_argument("--rival", type=Path, help="a submission zip to race head to model")
+    parser.add_argument(
+        "--rival-track", default="beginner_loop", help="the head-to-model track (the rival's)"
+    )
     args = parser.parse_args()
+    try:
+        get_track(args.rival_track)
+    except TrackNotFoundError as error:
+        parser.error(str(error))
     table = Table(title=f"passing pursuit driver, {LAPS}-lap seeded races ({SPACE})")
     columns = (
         "race type",
@@ -127,7 +134,8 @@ def main() -> None:
     for race_type, track in CASES:
         table.add_row(*row(race_type, track, args.seeds))
     if args.rival is not None:
-        table.add_row(*row("head_to_model", RIVAL_TRACK, args.seeds, read_policy_graph(args.rival)))
+        rival = read_policy_graph(args.rival)
+        table.add_row(*row("head_to_model", args.rival_track, args.seeds, rival))
     Console(width=200).print(table)
 
 
