@@ -165,7 +165,7 @@ def test_ctrl_c_with_workers_saves_packs_and_stops_every_worker(tmp_path):
     command = [sys.executable, "-m", "slipstream", "train", "--out", str(run), "--minutes", "5"]
     command += ["--sensors", "lidar", "--action-space", "3x3@1.0", "--workers", "2"]
     command += ["--eval-every", "1000", "--hyperparameters", str(hp)]
-    env = {**os.environ, "COLUMNS": "200"}
+    env = {**os.environ, "COLUMNS": "200", "PYTHONFAULTHANDLER": "1"}
     # A session of its own: the process group a terminal's Ctrl-C signals.
     proc = subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
@@ -180,7 +180,12 @@ def test_ctrl_c_with_workers_saves_packs_and_stops_every_worker(tmp_path):
         workers = _workers(proc.pid)
         assert len(workers) == 2
         os.killpg(proc.pid, signal.SIGINT)
-        output, _ = proc.communicate(timeout=120)
+        try:
+            output, _ = proc.communicate(timeout=120)
+        except subprocess.TimeoutExpired:  # hung: faulthandler prints every thread's stack
+            proc.send_signal(signal.SIGABRT)
+            output, _ = proc.communicate(timeout=30)
+            pytest.fail(f"the trainer outlived Ctrl-C by 120 s; its output and stacks:\n{output}")
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
