@@ -22,8 +22,6 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
-from agents.sigint import sigint_deferred
-
 
 class NonFiniteEnvError(ValueError):
     """The environment returned NaN during a rollout (checked when ``check_for_nan``)."""
@@ -71,10 +69,7 @@ class RacingRunner(OnPolicyRunner):
         started = time.monotonic()
         self._collect_rollout(it)
         collected = time.monotonic()
-        # A Ctrl-C waits for the update: raised inside the critic's gradient hook
-        # (agents.huber) it left torch's backward hung (tests/agents/test_train_workers.py).
-        with sigint_deferred():
-            losses = self.alg.update()
+        losses = self.alg.update()
         self.current_learning_iteration = it
         self.timings = (collected - started, time.monotonic() - collected)
         self._log(it, *self.timings, losses)

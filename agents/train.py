@@ -19,8 +19,11 @@ Run layout (``RUN`` = the output folder)::
 from __future__ import annotations
 
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from copy import deepcopy
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,7 +50,6 @@ from agents.rewards import resolve_reward
 from agents.runner import RacingRunner
 from agents.selfplay import OpponentPool
 from agents.settings import TrainSettings, load_settings, save_settings
-from agents.sigint import sigint_deferred
 from agents.vecenv import RacingVecEnv
 from arena.simtrace import write_simtrace
 from tracks.catalog import get_track
@@ -74,6 +76,22 @@ class TrainResult:
 
 def _rank() -> int:
     return int(os.getenv("RANK", "0"))
+
+
+@contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold a Ctrl-C (SIGINT) that arrives in the block until the block has run."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught and callable(previous):
+        previous(signal.SIGINT, None)  # Python's default handler raises KeyboardInterrupt
 
 
 class Trainer:
@@ -267,7 +285,7 @@ class Trainer:
                 before = self._checkpoint(runner, finished, finished_at, copy=True)
                 losses = runner.iteration(it)
                 stats = self._finish_iteration(runner, env, pool, it, elapsed(), losses)
-                with sigint_deferred():  # the iteration's outputs are written whole
+                with _sigint_deferred():  # the iteration's outputs are written whole
                     self._write_outputs(stats)
                     if stats.eval is not None:
                         content = self._checkpoint(runner, it, stats.elapsed_s)
