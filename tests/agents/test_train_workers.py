@@ -166,10 +166,13 @@ def test_ctrl_c_with_workers_saves_packs_and_stops_every_worker(tmp_path):
     command += ["--sensors", "lidar", "--action-space", "3x3@1.0", "--workers", "2"]
     command += ["--eval-every", "1000", "--hyperparameters", str(hp)]
     env = {**os.environ, "COLUMNS": "200", "PYTHONFAULTHANDLER": "1"}
-    # A session of its own: the process group a terminal's Ctrl-C signals.
+    # A session of its own: the process group a terminal's Ctrl-C signals. SIGINT as a
+    # terminal leaves it: a shell's background job (`make test &`) ignores SIGINT, and an
+    # ignored signal stays ignored in its children.
     proc = subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         start_new_session=True, env=env,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )  # fmt: skip
     try:
         metrics = run / "metrics.csv"
