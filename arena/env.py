@@ -582,7 +582,6 @@ class RacingEnv(ParallelEnv):
         """
         if self.config.mode != "training":
             raise RuntimeError("restart_car is for training mode; races run to the end")
-        live = self._cars[agent]
         if agent in self.agents:
             raise RuntimeError(f"car {agent!r} is still racing")
         self._car_episodes[agent] += 1
@@ -593,15 +592,48 @@ class RacingEnv(ParallelEnv):
             if not self.agents:
                 self._redraw_obstacles(arc)
             place = grid_slots(len(self.config.cars), self.track, arc)[0]
+        self._begin_episode(agent, place)
+        observation = self._observe([agent], fresh=True)[agent]
+        return observation, self._info(agent, self._initial_params(agent))
+
+    def restart_on_grid(
+        self, order: Sequence[str]
+    ) -> dict[str, tuple[dict[str, np.ndarray], dict[str, Any]]]:
+        """Start new training episodes for ``order``'s cars together, standing on a grid.
+
+        The grid is :func:`~arena.spawn.grid_slots`' at the next training start point, its
+        front lane drawn at random; the cars take its slots front first, as a race's start
+        puts them. Cars of ``order`` still racing lose their current episode unreported: for
+        a caller's frozen opponents, never for a learner mid-episode. The other cars race
+        on. Training only. Returns each car's first observation and info.
+        """
+        if self.config.mode != "training":
+            raise RuntimeError("restart_on_grid is for training mode; races run to the end")
+        unknown = [a for a in order if a not in self.possible_agents]
+        if unknown or len(set(order)) != len(order):
+            raise ValueError(f"restart_on_grid needs distinct cars of this race, got {order}")
+        for agent in order:
+            self._car_episodes[agent] += 1
+        episode = self._episode + max(self._car_episodes[a] for a in order)
+        front_lane = ("inner", "outer")[int(self.rng.integers(2))]
+        arc = start_arc(self.config, self.track, episode)
+        slots = grid_slots(len(order), self.track, arc, front_lane)
+        for agent, place in zip(order, slots, strict=True):
+            self._begin_episode(agent, place)
+        observations = self._observe(list(order), fresh=True)
+        return {a: (observations[a], self._info(a, self._initial_params(a))) for a in order}
+
+    def _begin_episode(self, agent: str, place: Placement) -> None:
+        """Put ``agent`` at ``place``, at rest, on a fresh lap record, and among the racing."""
+        live = self._cars[agent]
         live.car.teleport(place.x, place.y, place.yaw)
         live.last_point = live.car.model_point()
         live.record = self._rules.start(self._arc_of(live.last_point), self.time)
         live.hold, live.parked, live.command = None, False, (0.0, 0.0)
         live.released_at = None
+        self._last_offsets.pop(live.car.body_id, None)
         self._forget_poses()
         self.agents = [a for a in self.possible_agents if a in self.agents or a == agent]
-        observation = self._observe([agent], fresh=True)[agent]
-        return observation, self._info(agent, self._initial_params(agent))
 
     def _beside(self, other: str, gap_m: float) -> Placement:
         """The pose ``gap_m`` metres along the track from car ``other``'s origin (the point

@@ -15,6 +15,7 @@ from arena.env import RacingEnv
 from arena.lidar import clip_lidar
 from arena.race import run_race
 from arena.sensors_spec import LIDAR_CLIP
+from arena.spawn import GRID_GAP_M
 
 PARAM_KEYS = {
     "all_wheels_on_track",
@@ -281,6 +282,41 @@ def test_a_car_restarted_near_a_rival_starts_behind_it_in_the_other_lane() -> No
     assert behind == pytest.approx(1.0, abs=0.1)
     assert me["is_left_of_center"] != rival["is_left_of_center"]
     assert me["all_wheels_on_track"] and info["episode_status"] == "prepare"
+    env.close()
+
+
+def test_cars_restarted_on_a_grid_stand_in_its_slots_in_the_order_given() -> None:
+    env = arena.parallel_env(race_type="head_to_model", num_cars=2, mode="training")
+    _, infos = env.reset(seed=0)
+    driver = LaneFollowerPolicy(env.track, env.config.cars[1].action_space, speed=0.8)
+    while "car0" in env.agents:
+        _, _, _, _, step_infos = env.step(
+            {"car0": 1, "car1": driver.act({}, params=infos["car1"]["params"])}
+        )  # car0 turns off the track at full lock; car1 races on
+        infos.update(step_infos)
+    assert infos["car1"]["params"]["speed"] > 0.3
+    starts = env.restart_on_grid(["car1", "car0"])  # car1 in front, though it was racing
+    assert env.agents == ["car0", "car1"]
+    front, back = starts["car1"][1]["params"], starts["car0"][1]["params"]
+    behind = (front["projection_distance"] - back["projection_distance"]) % back["track_length"]
+    assert behind == pytest.approx(GRID_GAP_M, abs=0.1)
+    assert front["is_left_of_center"] != back["is_left_of_center"]
+    for car, (first, info) in starts.items():
+        assert env.observation_space(car).contains(first)
+        assert info["episode_status"] == "prepare" and info["params"]["speed"] == 0.0
+        assert info["params"]["all_wheels_on_track"] and info["params"]["progress"] == 0.0
+    _, _, _, _, step_infos = env.step({"car0": 4, "car1": 4})
+    assert step_infos["car0"]["params"]["steps"] == step_infos["car1"]["params"]["steps"] == 1
+    with pytest.raises(ValueError, match="distinct cars"):
+        env.restart_on_grid(["car1", "car1"])
+    env.close()
+
+
+def test_races_are_never_restarted_on_a_grid() -> None:
+    env = arena.parallel_env(race_type="head_to_model", num_cars=2, mode="race")
+    env.reset(seed=0)
+    with pytest.raises(RuntimeError, match="training mode"):
+        env.restart_on_grid(["car0", "car1"])
     env.close()
 
 
