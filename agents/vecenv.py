@@ -43,6 +43,11 @@ from arena.simtrace import simtrace_row, step_facts
 # docs/training.md, "Recipes per race type": 5.7-6.0 s laps when leading, 5.5-5.7 s
 # following).
 PASS_GAP_M = 1.0
+# Every GRID_EVERY-th restart of a learner racing frozen opponents is instead a standing
+# start on a fresh grid, the learner in the back slot, as a race starts it from behind: its
+# first training grid puts it in front, and restarts near a rival that is already racing
+# never practise the standing start that races from behind lose most on (docs/training.md).
+GRID_EVERY = 4
 
 
 class RaceStepError(RuntimeError):
@@ -60,6 +65,14 @@ class _Slot:
     steps: int = 0
     reward: float = 0.0
     start: float = 0.0  # simulated time the current episode started
+
+
+@dataclass(frozen=True)
+class _Restart:
+    """How a car's next training episode starts (default: the next start point)."""
+
+    near: tuple[str, float] | None = None  # RacingEnv.restart_car's near=(rival, gap_m)
+    grid: tuple[str, ...] = ()  # RacingEnv.restart_on_grid's cars, front first
 
 
 @dataclass
@@ -175,31 +188,50 @@ class EnvGroup:
                         self.rows.append(simtrace_row(facts, episode, wall_clock=time.time()))
                     if term[car] or trunc[car]:
                         episodes.append(self._episode_stats(i, car, slot, infos[car]))
-                if term[car] or trunc[car]:
-                    first, info = env.restart_car(car, self._restart_near(i, car))
-                    self.last_obs[(i, car)] = first
-                    self.last_info[(i, car)] = info
-                    if k is not None:
-                        self.slots[k].start = env.time
-                        if self.experts:
-                            self.experts[(i, car)].reset()
+            ended = [car for car in commands if term[car] or trunc[car]]
+            self._restart(i, sorted(ended, key=lambda c: c not in self.learners), slot_of)
         return StepBatch(self._stack_obs(), rewards, terminated, truncated, episodes)
 
-    def _restart_near(self, i: int, car: str) -> tuple[str, float] | None:
-        """Where head-to-model race ``i`` restarts ``car`` (``RacingEnv.restart_car``'s
-        ``near``), :data:`PASS_GAP_M` from a racing rival: a learner behind it on its
-        first restart, ahead of it on the next and so on, an opponent the other way round
-        (ahead of a learner first). Else None."""
+    def _restart(self, i: int, ended: list[str], slot_of: dict[tuple[int, str], int]) -> None:
+        """Start new episodes for race ``i``'s cars whose episodes ended (learners first)."""
+        env = self.envs[i]
+        for car in ended:
+            if car in env.agents:
+                continue  # already back, on a grid behind it with a learner
+            restart = self._restart_kind(i, car)
+            starts = (
+                env.restart_on_grid(restart.grid)
+                if restart.grid
+                else {car: env.restart_car(car, restart.near)}
+            )
+            for started, (first, info) in starts.items():
+                self.last_obs[(i, started)] = first
+                self.last_info[(i, started)] = info
+                k = slot_of.get((i, started))
+                if k is not None:
+                    self.slots[k].start = env.time
+                    if self.experts:
+                        self.experts[(i, started)].reset()
+
+    def _restart_kind(self, i: int, car: str) -> _Restart:
+        """How head-to-model race ``i`` restarts ``car``: :data:`PASS_GAP_M` from a racing
+        rival, a learner behind it on its first restart, ahead of it on the next and so on,
+        an opponent the other way round (ahead of a learner first); but a learner racing
+        only frozen opponents starts every :data:`GRID_EVERY`-th restart, one from behind,
+        standing behind them on a fresh grid. Other race types: the next start point."""
         env = self.envs[i]
         if env.config.race_type != "head_to_model":
-            return None
+            return _Restart()
         learner = car in self.learners
         rivals = [c for c in env.agents if c != car and (learner or c in self.learners)]
         if not rivals:
-            return None
-        behind = (self.restarts[(i, car)] % 2 == 0) == learner
+            return _Restart()
+        count = self.restarts[(i, car)]
         self.restarts[(i, car)] += 1
-        return (rivals[0], -PASS_GAP_M if behind else PASS_GAP_M)
+        behind = (count % 2 == 0) == learner
+        if learner and count % GRID_EVERY == 0 and self.learners.isdisjoint(rivals):
+            return _Restart(grid=(*rivals, car))
+        return _Restart(near=(rivals[0], -PASS_GAP_M if behind else PASS_GAP_M))
 
     def _action(
         self, i: int, car: str, actions: np.ndarray, slot_of: dict[tuple[int, str], int]

@@ -11,8 +11,9 @@ from tensordict import TensorDict
 import arena
 from agents import networks
 from agents.export import export_onnx
-from agents.vecenv import PASS_GAP_M, RacingVecEnv
+from agents.vecenv import GRID_EVERY, PASS_GAP_M, RacingVecEnv
 from arena.actions import ContinuousActionSpace, default_discrete_space
+from arena.spawn import GRID_GAP_M
 
 SPACE = default_discrete_space()
 
@@ -108,11 +109,12 @@ def test_head_to_model_with_frozen_opponent():
     )
     try:
         assert env.num_envs == 2  # one learner slot per race; car1 is an opponent
+        torch.manual_seed(0)  # the same opponent, so the same restarts, every run
         actor = networks.build_actor("dense 256-256", ("lidar",), SPACE)
         graph = export_onnx(actor, ("lidar",), SPACE)
         env.set_opponents({0: ("snapshot:0", graph), 1: ("snapshot:0", graph)})
-        gaps = []  # the rival's distance ahead of each restarted learner
-        for _ in range(60):
+        near, grid = [], []  # the rival's distance ahead of each restarted learner
+        for _ in range(90):
             _, _, dones, _ = env.step(_one_hot(env, 1))  # the learners circle off the road
             for i in dones.nonzero().flatten().tolist():
                 race = env._local.envs[i]
@@ -122,11 +124,15 @@ def test_head_to_model_with_frozen_opponent():
                 rival = env._local.last_info[(i, "car1")]["params"]
                 length = me["track_length"]
                 gap = rival["projection_distance"] - me["projection_distance"]
-                gaps.append((gap + length / 2) % length - length / 2)
+                standing = rival["steps"] == 0  # the rival was restarted with the learner
+                (grid if standing else near).append((gap + length / 2) % length - length / 2)
                 assert me["is_left_of_center"] != rival["is_left_of_center"]
-        # Restarted behind the rival (to follow or pass it) and ahead of it (to lead).
-        assert [abs(g) for g in gaps] == pytest.approx([PASS_GAP_M] * len(gaps), abs=0.15)
-        assert min(gaps) < 0 < max(gaps)
+        # Restarted behind the rival (to follow or pass it) and ahead of it (to lead), and
+        # every GRID_EVERY-th time both standing on a grid, the learner in the back slot.
+        assert [abs(g) for g in near] == pytest.approx([PASS_GAP_M] * len(near), abs=0.15)
+        assert min(near) < 0 < max(near)
+        assert len(grid) >= 2 and grid == pytest.approx([GRID_GAP_M] * len(grid), abs=0.1)
+        assert len(near) >= (GRID_EVERY - 1) * (len(grid) - 1)
         episodes = env.pop_episodes()
         assert episodes and all(e["opponent"] == "snapshot:0" for e in episodes)
         assert all(isinstance(e["win"], bool) for e in episodes)
