@@ -44,6 +44,9 @@ class CarResult:
 
     ``gap_to_winner`` is the car's total time minus the winner's, in seconds: 0.0 for the
     winner, ``None`` for a car that did not finish (and for every car when none finished).
+    ``grid_offset`` is where the car started, metres along the track from the front of the
+    grid (0.0 for the front slot, negative behind it); ``None`` in results stored before it
+    was recorded.
     """
 
     name: str
@@ -64,6 +67,7 @@ class CarResult:
     at_fault_collisions: int = 0
     laps_led: int = 0
     gap_to_winner: float | None = None
+    grid_offset: float | None = None
 
 
 @dataclass(frozen=True)
@@ -173,7 +177,8 @@ def run_race(
         bots: list[list[list[float]]] = []
         obstacles = [list(o) for o in env.obstacle_poses()]
         last_info = dict(infos)
-        metrics = RacingMetrics(_grid_offsets(env, names))
+        grid = _grid_offsets(env, names)
+        metrics = RacingMetrics(grid)
         steps = 0
         while env.agents:
             actions = {a: _act(policies[a], observations[a], last_info[a]) for a in env.agents}
@@ -187,7 +192,7 @@ def run_race(
                     bots.append([list(b) for b in env.bot_poses()])
             if on_step is not None:
                 on_step(env)
-        return _result(config, env, steps, trace, facts, bots, obstacles, metrics)
+        return _result(config, env, steps, trace, facts, bots, obstacles, metrics, grid)
     finally:
         env.close()
 
@@ -226,6 +231,7 @@ def _result(
     bots: list[list[list[float]]],
     obstacles: list[list[float]],
     metrics: RacingMetrics,
+    grid: Mapping[str, float],
 ) -> RaceResult:
     rows = []
     for car in config.cars:
@@ -248,6 +254,7 @@ def _result(
                 "penalty_seconds": rec.penalty_seconds,
                 "distance": rec.distance,
                 **asdict(metrics.cars[car.name]),
+                "grid_offset": grid[car.name],
             }
         )
     order = sorted(

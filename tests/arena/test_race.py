@@ -10,6 +10,7 @@ from agents.pursuit import PurePursuitPolicy
 from arena.cli import print_results
 from arena.config import RaceConfig, resolve_track
 from arena.race import RaceResult, run_race
+from arena.spawn import GRID_GAP_M
 
 TRACK = "slipstream_speedway"
 
@@ -59,6 +60,12 @@ def test_the_faster_car_passes_the_slower_one_on_track_and_wins(duel: RaceResult
     assert fast.laps_led == duel.config.laps and slow.laps_led == 0
 
 
+def test_each_result_says_where_its_car_started_on_the_grid(duel: RaceResult) -> None:
+    slow, fast = duel.car("slow"), duel.car("fast")  # listed order: slow in the front slot
+    assert slow.grid_offset == 0.0
+    assert fast.grid_offset == pytest.approx(-GRID_GAP_M, abs=0.1)
+
+
 def test_gaps_are_measured_to_the_winner(duel: RaceResult) -> None:
     winner = duel.car(duel.finish_order[0])
     assert winner.gap_to_winner == 0.0
@@ -87,10 +94,11 @@ def test_a_result_round_trips_and_older_results_load_without_metrics(duel: RaceR
     for car in old["cars"]:
         for key in ("overtakes", "times_overtaken", "at_fault_collisions", "laps_led"):
             del car[key]
-        del car["gap_to_winner"]
+        del car["gap_to_winner"], car["grid_offset"]
     loaded = RaceResult.from_dict(old)
     assert loaded.events == [] and loaded.finish_order == duel.finish_order
     assert all(c.overtakes == 0 and c.gap_to_winner is None for c in loaded.cars)
+    assert all(c.grid_offset is None for c in loaded.cars)
 
 
 def test_the_race_table_shows_the_racing_metrics(
