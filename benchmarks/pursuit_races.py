@@ -63,7 +63,7 @@ def race(race_type: str, track: str, seed: int, rival: bytes | None = None) -> R
         return run_race(config, {"car0": driver}, record_trace=False)
     me, other = driver_slots(seed)
     policies = {me: driver, other: opponent_policy(rival, discrete=False, name="rival")}
-    return run_race(config, policies, record_trace=True)  # the trace says who started ahead
+    return run_race(config, policies, record_trace=False)
 
 
 def driver_slots(seed: int) -> tuple[str, str]:
@@ -86,7 +86,7 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
         if rival is not None:
             opponent = result.car(other)
             rival_incidents += opponent.off_track_count + opponent.crash_count
-            wins += split.add(result, course, me, other)
+            wins += split.add(result, me, other)
     median = statistics.median(best)
     limit = racing_line_for(course).lap_time  # the line the driver follows
     against = ["-"] * 4

@@ -32,7 +32,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, get_args
 
-import numpy as np
 from rich.console import Console
 from rich.table import Table
 
@@ -48,7 +47,6 @@ from agents.train import Trainer, TrainResult, run_hyperparameters
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
-from tracks.track import Track
 
 
 @dataclass(frozen=True)
@@ -204,7 +202,6 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
     parent = load_settings(parent_dir)
     learner_graph = read_policy_graph(run_dir / "model" / "model.zip")
     parent_graph = read_policy_graph(parent_zip(parent_dir))
-    track = get_track(s.track)
     wins = overtakes = at_fault = 0
     split = StartSplit()
     for seed in range(races):
@@ -225,9 +222,9 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
             learner_car: opponent_policy(learner_graph, s.discrete, name="learner"),
             parent_car: opponent_policy(parent_graph, parent.discrete, name="parent"),
         }
-        race: RaceResult = run_race(config, policies, record_trace=True)
+        race: RaceResult = run_race(config, policies, record_trace=False)
         learner = race.car(learner_car)
-        wins += split.add(race, track, learner_car, parent_car)
+        wins += split.add(race, learner_car, parent_car)
         overtakes += learner.overtakes
         at_fault += learner.at_fault_collisions
     return {
@@ -239,23 +236,16 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
     }
 
 
-def started_ahead(race: RaceResult, track: Track, car: str, other: str) -> bool:
-    """Whether ``car`` started in front of ``other`` (from the trace's first poses)."""
-    first = [(race.trace[c]["x"][0], race.trace[c]["y"][0]) for c in (car, other)]
-    arc = track.project(np.asarray(first)).arc_length
-    return float(track.arc_delta(arc[1], arc[0])) > 0.0
-
-
 @dataclass
 class StartSplit:
     """One car's two-car races against another, ``[wins, races]`` by who started in front."""
 
     tallies: dict[bool, list[int]] = field(default_factory=lambda: {True: [0, 0], False: [0, 0]})
 
-    def add(self, race: RaceResult, track: Track, car: str, other: str) -> bool:
-        """Count ``race`` (it needs its trace); whether ``car`` finished ahead of ``other``."""
+    def add(self, race: RaceResult, car: str, other: str) -> bool:
+        """Count ``race``; whether ``car`` finished ahead of ``other``."""
         won = race.finish_order.index(car) < race.finish_order.index(other)
-        tally = self.tallies[started_ahead(race, track, car, other)]
+        tally = self.tallies[race.car(car).grid_offset > race.car(other).grid_offset]
         tally[0] += won
         tally[1] += 1
         return won
