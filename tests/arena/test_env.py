@@ -267,15 +267,22 @@ def test_training_restart_car_starts_a_new_episode_for_one_car() -> None:
     env.close()
 
 
-def test_a_car_restarted_near_a_rival_starts_behind_it_in_the_other_lane() -> None:
+def _car0_off_while_car1_races() -> tuple[RacingEnv, dict]:
+    """A two-car training race stepped until car0, at full lock, leaves the track while
+    car1 follows its lane at 0.8 m/s; returns the env and each car's last info."""
     env = arena.parallel_env(race_type="head_to_model", num_cars=2, mode="training")
     _, infos = env.reset(seed=0)
     driver = LaneFollowerPolicy(env.track, env.config.cars[1].action_space, speed=0.8)
     while "car0" in env.agents:
         _, _, _, _, step_infos = env.step(
             {"car0": 1, "car1": driver.act({}, params=infos["car1"]["params"])}
-        )  # car0 turns off the track at full lock
+        )
         infos.update(step_infos)
+    return env, infos
+
+
+def test_a_car_restarted_near_a_rival_starts_behind_it_in_the_other_lane() -> None:
+    env, infos = _car0_off_while_car1_races()
     _, info = env.restart_car("car0", near=("car1", -1.0))
     me, rival = info["params"], infos["car1"]["params"]
     behind = (rival["projection_distance"] - me["projection_distance"]) % me["track_length"]
@@ -286,14 +293,7 @@ def test_a_car_restarted_near_a_rival_starts_behind_it_in_the_other_lane() -> No
 
 
 def test_cars_restarted_on_a_grid_stand_in_its_slots_in_the_order_given() -> None:
-    env = arena.parallel_env(race_type="head_to_model", num_cars=2, mode="training")
-    _, infos = env.reset(seed=0)
-    driver = LaneFollowerPolicy(env.track, env.config.cars[1].action_space, speed=0.8)
-    while "car0" in env.agents:
-        _, _, _, _, step_infos = env.step(
-            {"car0": 1, "car1": driver.act({}, params=infos["car1"]["params"])}
-        )  # car0 turns off the track at full lock; car1 races on
-        infos.update(step_infos)
+    env, infos = _car0_off_while_car1_races()
     assert infos["car1"]["params"]["speed"] > 0.3
     starts = env.restart_on_grid(["car1", "car0"])  # car1 in front, though it was racing
     assert env.agents == ["car0", "car1"]
