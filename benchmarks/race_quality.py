@@ -122,6 +122,7 @@ def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None)
         critic=args.critic,
         teacher=recipe.teacher,
         workers=workers,
+        device=args.device,
         minutes=args.minutes,
         eval_every=args.eval_every,
         eval_time_limit=recipe.eval_time_limit,
@@ -336,6 +337,7 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--workers", type=int, help="worker processes (default: the recipe's)")
     parser.add_argument("--eval-every", type=int, default=5, help="evaluate every N iterations")
     parser.add_argument("--races", type=int, default=H2M_RACES, help="head_to_model races")
+    parser.add_argument("--device", default="cpu", help="where PPO trains: cpu, cuda or cuda:N")
     parser.add_argument(
         "--critic",
         choices=get_args(CriticInput),

@@ -1,8 +1,8 @@
 """Training cost: where an iteration's time goes (collection vs PPO update).
 
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
-evaluations or run files) for each ``--workers`` and ``--critic`` value and prints one
-table: samples/s end to end, collection and update seconds per iteration, the update's
+evaluations or run files) for each ``--device``, ``--workers`` and ``--critic`` value and
+prints one table: samples/s end to end, collection and update seconds per iteration, the update's
 share, the value loss of the last iteration. The first iteration is a warm-up and is not
 counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
@@ -14,6 +14,7 @@ Run::
     .venv/bin/python benchmarks/train_profile.py --sensors camera --preset "3-layer CNN" \\
         --hyperparameters hp.json --workers 0,2 --profile
     .venv/bin/python benchmarks/train_profile.py --sensors camera --critic sensors,privileged
+    .venv/bin/python benchmarks/train_profile.py --sensors lidar --device cpu,cuda
 """
 
 from __future__ import annotations
@@ -40,7 +41,11 @@ from agents.vecenv import RacingVecEnv
 
 
 def measure(
-    args: argparse.Namespace, workers: int, critic: CriticInput, hp: Hyperparameters
+    args: argparse.Namespace,
+    device: str,
+    workers: int,
+    critic: CriticInput,
+    hp: Hyperparameters,
 ) -> dict[str, float]:
     """Train ``args.iterations`` (+1 warm-up) iterations; mean timings and the last losses."""
     sensors = tuple(args.sensors.split(","))
@@ -58,7 +63,7 @@ def measure(
         actor_cfg, critic_cfg, groups = networks.model_configs(preset, sensors, space, critic)
         cfg = hp.to_rsl_rl(env.num_envs, actor_cfg, critic_cfg, groups, args.steps_per_env)
         torch.manual_seed(0)
-        runner = RacingRunner(env, cfg, log_dir=None, device="cpu")
+        runner = RacingRunner(env, cfg, log_dir=None, device=device)
         runner.start()
         collect = update = 0.0
         losses: dict[str, float] = {}
@@ -81,6 +86,7 @@ def measure(
         n = args.iterations
         algorithm = cfg["algorithm"]
         return {
+            "device": device,
             "workers": workers,
             "preset": preset,
             "critic": critic,
@@ -106,6 +112,7 @@ def main() -> None:
     parser.add_argument("--hyperparameters", type=Path, default=None)
     parser.add_argument("--steps-per-env", type=int, default=None)
     parser.add_argument("--workers", default="0", help="comma-separated, e.g. 0,2")
+    parser.add_argument("--device", default="cpu", help="comma-separated, e.g. cpu,cuda")
     parser.add_argument(
         "--critic",
         default=TrainSettings.model_fields["critic"].default,
@@ -117,19 +124,21 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
     rows = [
-        measure(args, int(w), critic, hp or Hyperparameters())
+        measure(args, device, int(w), critic, hp or Hyperparameters())
+        for device in args.device.split(",")
         for w in args.workers.split(",")
         for critic in args.critic.split(",")
     ]
     table = Table(title=f"training cost: {args.sensors}, {args.iterations} iterations")
     for column in (
-        "workers", "preset", "critic", "samples/it", "minibatches/it", "samples/s",
+        "device", "workers", "preset", "critic", "samples/it", "minibatches/it", "samples/s",
         "collect s/it", "update s/it", "update share", "value loss",
     ):  # fmt: skip
         table.add_column(column)
     for r in rows:
         total = r["collect_s"] + r["update_s"]
         table.add_row(
+            str(r["device"]),
             str(r["workers"]),
             str(r["preset"]),
             str(r["critic"]),
