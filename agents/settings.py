@@ -23,6 +23,10 @@ from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
+# Parallel races per worker process (or in-process) when ``races`` is not given: each step
+# of a worker carries a fixed cost (pipe, pickling, waking it), which two races share
+# (docs/training.md, "The adapter").
+RACES_PER_WORKER = 2
 # The camera default before ``CPU CNN``: the preset of camera runs stored without one.
 FORMER_CAMERA_PRESET = "3-layer CNN"
 # The critic of runs stored before the ``critic`` setting existed.
@@ -73,7 +77,11 @@ class TrainSettings(BaseModel):
     workers: int | None = Field(
         None, description="Worker processes (default: CPU cores; 0: in-process)."
     )
-    races: int | None = Field(None, description="Parallel races (default: one per worker).")
+    races: int | None = Field(
+        None,
+        description=f"Parallel races (default: {RACES_PER_WORKER} per worker, "
+        f"{RACES_PER_WORKER} in-process).",
+    )
     iterations: int | None = Field(None, description="Iteration budget.")
     minutes: float | None = Field(None, description="Wall-clock budget in minutes.")
     steps_per_env: int | None = Field(

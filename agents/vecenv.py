@@ -29,6 +29,7 @@ from agents.imitation import EXPERT_GROUP, ExpertDriver
 from agents.networks import observation_groups
 from agents.privileged import PRIVILEGED_GROUP, privileged_state
 from agents.rewards import resolve_reward
+from agents.settings import RACES_PER_WORKER
 from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
 from arena.env import RacingEnv
@@ -325,7 +326,8 @@ class RacingVecEnv(VecEnv):
         config: the race (``mode="training"``); its cars' sensors and action space are the
             learner's.
         reward: path of a reward-function file or a bundled sample's name.
-        num_races: race instances (default: one per worker, at least one).
+        num_races: race instances (default: :data:`~agents.settings.RACES_PER_WORKER` per
+            worker, as many in-process).
         num_workers: worker processes (default ``os.cpu_count()``; 0 = in-process).
         learner_cars: cars the shared policy drives (default: all); the others need
             opponents (:meth:`set_opponents`).
@@ -351,7 +353,7 @@ class RacingVecEnv(VecEnv):
         if config.mode != "training":
             raise ValueError("RacingVecEnv needs a training-mode race config")
         workers = (os.cpu_count() or 1) if num_workers is None else num_workers
-        self.num_races = num_races or max(1, workers)
+        self.num_races = num_races or RACES_PER_WORKER * max(1, workers)
         self.learner_cars = learner_cars or [c.name for c in config.cars]
         self.config = config
         self.device = device

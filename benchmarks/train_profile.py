@@ -55,7 +55,7 @@ def measure(
     env = RacingVecEnv(
         config,
         args.reward,
-        num_races=max(1, workers),
+        num_races=args.races,
         num_workers=workers,
         privileged=critic == "privileged",
     )
@@ -88,6 +88,7 @@ def measure(
         return {
             "device": device,
             "workers": workers,
+            "races": env.num_races,
             "preset": preset,
             "critic": critic,
             "samples": samples,
@@ -113,6 +114,7 @@ def main() -> None:
     parser.add_argument("--steps-per-env", type=int, default=None)
     parser.add_argument("--workers", default="0", help="comma-separated, e.g. 0,2")
     parser.add_argument("--device", default="cpu", help="comma-separated, e.g. cpu,cuda")
+    parser.add_argument("--races", type=int, default=None, help="parallel races (default: train's)")
     parser.add_argument(
         "--critic",
         default=TrainSettings.model_fields["critic"].default,
@@ -131,8 +133,8 @@ def main() -> None:
     ]
     table = Table(title=f"training cost: {args.sensors}, {args.iterations} iterations")
     for column in (
-        "device", "workers", "preset", "critic", "samples/it", "minibatches/it", "samples/s",
-        "collect s/it", "update s/it", "update share", "value loss",
+        "device", "workers", "races", "preset", "critic", "samples/it", "minibatches/it",
+        "samples/s", "collect s/it", "update s/it", "update share", "value loss",
     ):  # fmt: skip
         table.add_column(column)
     for r in rows:
@@ -140,6 +142,7 @@ def main() -> None:
         table.add_row(
             str(r["device"]),
             str(r["workers"]),
+            str(r["races"]),
             str(r["preset"]),
             str(r["critic"]),
             str(r["samples"]),

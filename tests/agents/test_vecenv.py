@@ -11,6 +11,7 @@ from tensordict import TensorDict
 import arena
 from agents import networks
 from agents.export import export_onnx
+from agents.settings import RACES_PER_WORKER
 from agents.vecenv import GRID_EVERY, PASS_GAP_M, RacingVecEnv
 from arena.actions import ContinuousActionSpace, default_discrete_space
 from arena.spawn import GRID_GAP_M
@@ -64,6 +65,18 @@ def test_shapes_dones_and_auto_reset(workers):
         rows = env.drain_simtrace()
         assert len(rows) == 90 * 2 and {"episode", "X", "done", "tstamp"} <= set(rows[0])
         assert (env.episode_length_buf < 90).all()  # restarted after their episodes ended
+    finally:
+        env.close()
+
+
+def test_default_races_share_each_worker():
+    """Without ``num_races``, every worker (or the trainer, in-process) steps
+    ``RACES_PER_WORKER`` races, each with its own seed."""
+    env = RacingVecEnv(_config(sensors=("lidar",)), "follow_center_line", num_workers=0)
+    try:
+        assert env.num_races == env.num_envs == RACES_PER_WORKER > 1
+        seeds = [race.config.seed for race in env._local.envs]
+        assert seeds[0] == 3 and len(set(seeds)) == RACES_PER_WORKER
     finally:
         env.close()
 
