@@ -1,10 +1,10 @@
 """Training cost: where an iteration's time goes (collection vs PPO update).
 
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
-evaluations or run files) for each ``--device``, ``--workers`` and ``--critic`` value and
-prints one table: samples/s end to end, collection and update seconds per iteration, the update's
-share, the value loss of the last iteration. The first iteration is a warm-up and is not
-counted.
+evaluations or run files) for each ``--device``, ``--workers`` and ``--critic`` value, with
+``--races`` parallel races (default: train's), and prints one table: samples/s end to end,
+collection and update seconds per iteration, the update's share, the value loss of the
+last iteration. The first iteration is a warm-up and is not counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
 time.
 
