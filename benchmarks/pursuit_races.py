@@ -9,8 +9,9 @@ avoidance on ``slipstream_speedway`` (6 random boxes), head to bot on ``beginner
 ``--rival-track``, the track the model learned (default ``beginner_loop``, the sample
 models'). Columns: the driver's off-tracks and collisions over all races, the median
 best lap and its ratio to the physical-limit lap, and against the rival its wins (also
-split by which car started in front, as ``race_quality.py`` does) and the rival's own
-off-tracks and collisions. One process, no training.
+split by which car started in front, with the driver's mean margin at the finish in the
+races it started behind, as ``race_quality.py`` does) and the rival's own off-tracks and
+collisions. One process, no training.
 
 Run::
 
@@ -89,10 +90,11 @@ def row(race_type: str, track: str, seeds: int, rival: bytes | None = None) -> l
             wins += split.add(result, me, other)
     median = statistics.median(best)
     limit = racing_line_for(course).lap_time  # the line the driver follows
-    against = ["-"] * 4
+    against = ["-"] * 5
     if rival is not None:
+        margin = split.behind_margin()
         against = [f"{wins / seeds:.0%}", split.cell(True), split.cell(False)]
-        against.append(str(rival_incidents))
+        against += ["-" if margin is None else f"{margin:+.2f}", str(rival_incidents)]
     return [
         race_type,
         track,
@@ -127,6 +129,7 @@ def main() -> None:
         "wins vs rival",
         "wins from ahead",
         "wins from behind",
+        "margin from behind (s)",
         "rival's off-tracks + collisions",
     )
     for column in columns:

@@ -11,8 +11,9 @@ evaluation of the packed model (the run's best evaluation, whose weights ``model
 holds). ``head_to_model`` starts from the time-trial run
 (``clone``), trains against a pool of its own snapshots plus the time-trial model, and
 then races the time-trial parent :data:`H2M_RACES` seeded times: win rate (and the wins
-of the races it started in front and behind), overtakes and at-fault collisions per race
-(the learner's, ``arena.racing_metrics``).
+of the races it started in front and behind, and its mean margin at the finish in those
+it started behind), overtakes and at-fault collisions per race (the learner's,
+``arena.racing_metrics``).
 
 Run::
 
@@ -197,7 +198,8 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
     ``ahead_wins`` and ``behind_wins`` (``"won/raced"``) split the races by which car
     started in front: laps are timed from each car's own slot, so a car that does not
     get past wins from behind only by ending the race closer to the leader than it
-    started.
+    started. ``behind_margin`` is the learner's mean total time minus the parent's in
+    the races it started behind (negative: it won them on average).
     """
     s = load_settings(run_dir)
     parent = load_settings(parent_dir)
@@ -232,6 +234,7 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
         "win_rate": wins / races,
         "ahead_wins": split.cell(ahead=True),
         "behind_wins": split.cell(ahead=False),
+        "behind_margin": split.behind_margin(),
         "overtakes": overtakes / races,
         "at_fault": at_fault / races,
     }
@@ -239,21 +242,33 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
 
 @dataclass
 class StartSplit:
-    """One car's two-car races against another, ``[wins, races]`` by who started in front."""
+    """One car's two-car races against another, ``[wins, races]`` by who started in front,
+    and by how much it finished ahead or behind in the races it started behind."""
 
     tallies: dict[bool, list[int]] = field(default_factory=lambda: {True: [0, 0], False: [0, 0]})
+    behind_margins: list[float] = field(default_factory=list)
 
     def add(self, race: RaceResult, car: str, other: str) -> bool:
         """Count ``race``; whether ``car`` finished ahead of ``other``."""
+        me, rival = race.car(car), race.car(other)
         won = race.finish_order.index(car) < race.finish_order.index(other)
-        tally = self.tallies[race.car(car).grid_offset > race.car(other).grid_offset]
+        ahead = me.grid_offset > rival.grid_offset
+        tally = self.tallies[ahead]
         tally[0] += won
         tally[1] += 1
+        if not ahead and me.total_time is not None and rival.total_time is not None:
+            self.behind_margins.append(me.total_time - rival.total_time)
         return won
 
     def cell(self, ahead: bool) -> str:
         """``"won/raced"`` of the races ``car`` started in front (``ahead``) or behind."""
         return "{}/{}".format(*self.tallies[ahead])
+
+    def behind_margin(self) -> float | None:
+        """Mean seconds ``car`` finished behind ``other`` (negative: ahead of it) in the
+        races it started behind and both finished; None if there were none."""
+        margins = self.behind_margins
+        return sum(margins) / len(margins) if margins else None
 
 
 def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namespace) -> dict:
@@ -296,6 +311,7 @@ COLUMNS = (
     ("win rate vs parent", "win_rate", "{:.0%}"),
     ("wins from ahead", "ahead_wins", "{}"),
     ("wins from behind", "behind_wins", "{}"),
+    ("margin from behind (s)", "behind_margin", "{:+.2f}"),
     ("overtakes / race", "overtakes", "{:.2f}"),
     ("at-fault collisions / race", "at_fault", "{:.2f}"),
 )
