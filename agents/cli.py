@@ -1,14 +1,17 @@
 """``slipstream train`` and ``slipstream evaluate`` (a Typer app with those two commands).
 
-Every ``train`` option except ``--out``, ``--clone``, ``--resume`` and ``--hyperparameters``
-is the :class:`~agents.settings.TrainSettings` field of the same name, with the field's
-description as its help and, where the command line takes the same form, its default.
+``train`` has one option per :class:`~agents.settings.TrainSettings` field that is a
+command-line setting (``agents/options.py``), generated from the field with its description
+as help, besides ``--out``, ``--recipe``, ``--list-recipes``, ``--clone``, ``--resume`` and
+``--hyperparameters``.
 """
 
 from __future__ import annotations
 
+import inspect
 import os
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -16,12 +19,15 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
 
-from agents.model_metadata import training_metadata
+from agents.options import defaults, option_form, option_names, settings_from_options
+from agents.recipes import RECIPES, get_recipe, parent_model
 from agents.settings import RESUME_OVERRIDES, TrainSettings, load_settings
-from arena.sensors_spec import DEEPRACER_SENSOR, IMAGE_SENSORS, check_sensors
+from arena.sensors_spec import IMAGE_SENSORS
 
 if TYPE_CHECKING:
+    from agents.hyperparameters import Hyperparameters
     from agents.metrics import IterationStats
 
 app = typer.Typer(help="Train and evaluate racing policies.", no_args_is_help=True)
@@ -45,112 +51,131 @@ def _device(device: str) -> str:
     return device
 
 
-def _setting(name: str) -> Any:
-    """The option for the ``TrainSettings`` field ``name``, its description as help."""
-    return typer.Option(help=TrainSettings.model_fields[name].description)
-
-
-def _default(name: str) -> Any:
-    """The default of the ``TrainSettings`` field ``name``."""
-    return TrainSettings.model_fields[name].default
-
-
-def _sensors(option: str | None, action_space: str) -> tuple[str, ...]:
-    """``--sensors``, else those of a ``model_metadata.json`` action space, else the default.
-
-    ``--sensors`` that disagree with the metadata file's ``sensor`` list are an error naming
-    both, as are sensors no car can carry.
-    """
-    given = tuple(s.strip() for s in option.split(",") if s.strip()) if option else ()
-    meta = training_metadata(action_space)
-    if meta is None:
-        return check_sensors(given or _default("sensors"))
-    if given and set(check_sensors(given)) != set(meta.sensors):
-        in_file = [DEEPRACER_SENSOR[s] for s in meta.sensors]
-        raise ValueError(
-            f"--sensors {','.join(given)} conflicts with {action_space}'s sensor {in_file} "
-            f"({','.join(meta.sensors)} here): drop --sensors to train with the file's sensors, "
-            "or change the file"
+def _with_setting_options(command: Callable[..., None]) -> Callable[..., None]:
+    """Give ``command`` (which takes ``**settings``) one option per settings field."""
+    signature = inspect.signature(command, eval_str=True)
+    own = [p for p in signature.parameters.values() if p.kind is not p.VAR_KEYWORD]
+    generated = []
+    for name in option_names():
+        kind, default = option_form(name)
+        info = typer.Option(help=TrainSettings.model_fields[name].description)
+        annotation = Annotated[kind, info]
+        generated.append(
+            inspect.Parameter(
+                name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation
+            )
         )
-    return meta.sensors
+    parameters = [*own, *generated]
+    command.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
+    command.__annotations__ = {p.name: p.annotation for p in parameters} | {"return": None}
+    return command
 
 
-def _settings(out: Path, resume: bool, options: dict[str, Any]) -> TrainSettings:
-    """The run's settings from the options named after its fields (command-line forms parsed).
+def _list_recipes(value: bool) -> None:
+    """``--list-recipes``: print the recipes, one line each, and exit."""
+    if not value:
+        return
+    table = Table("recipe", "race type", "what it trains", box=None)
+    for recipe in RECIPES.values():
+        table.add_row(recipe.name, recipe.options["race_type"], recipe.summary)
+    console.print(table)
+    console.print("train one: slipstream train --recipe NAME --out runs/NAME --minutes 10")
+    raise typer.Exit()
 
-    ``--resume`` reads them from the run, but for those in ``RESUME_OVERRIDES``.
-    """
-    from agents.action_spaces import parse_action_space_spec
 
+def _settings(
+    out: Path, recipe: str | None, clone: Path | None, resume: bool, given: dict[str, Any]
+) -> TrainSettings:
+    """The run's settings: the options ``given`` (command-line forms) over the recipe's,
+    over the defaults; ``--resume`` reads them from the run but for ``RESUME_OVERRIDES``."""
     if resume:
-        return load_settings(out).model_copy(update={k: options[k] for k in RESUME_OVERRIDES})
-    reward_fn = options["reward_fn"]
-    if reward_fn.endswith(".py") or Path(reward_fn).exists():
-        reward_fn = str(Path(reward_fn).resolve())
-    parsed = {
-        "sensors": _sensors(options["sensors"], options["action_space"]),
-        "action_space": parse_action_space_spec(options["action_space"]),
-        "reward_fn": reward_fn,
-        "opponent": tuple(str(Path(p).resolve()) for p in options["opponent"] or ()),
-    }
-    return TrainSettings(**{**options, **parsed})
+        if recipe is not None:
+            raise ValueError("--resume continues a run with its own settings: drop --recipe")
+        every = {**defaults(), **given}
+        return load_settings(out).model_copy(update={k: every[k] for k in RESUME_OVERRIDES})
+    if recipe is None:
+        return settings_from_options(given)
+    chosen = get_recipe(recipe)
+    if chosen.parent is not None and "opponent" not in given:
+        if clone is None:
+            raise ValueError(
+                f"the {recipe} recipe starts from a {chosen.parent} run: give --clone RUN "
+                f"(e.g. one trained with --recipe {chosen.parent})"
+            )
+        given = {**given, "opponent": [parent_model(clone)]}
+    return chosen.settings(given)
+
+
+def _hyperparameters(path: Path | None, recipe: str | None) -> Hyperparameters | None:
+    """An explicit ``hyperparameters.json`` (ignored keys warned about), else the recipe's
+    (None: the run's on ``--resume``, DeepRacer's defaults otherwise)."""
+    from agents.hyperparameters import Hyperparameters
+
+    if path is None:
+        return get_recipe(recipe).hyperparameters_model() if recipe else None
+    hp, ignored = Hyperparameters.read(path)
+    if ignored:
+        console.print(
+            f"[yellow]warning:[/] {escape(str(path))}: ignoring {escape(', '.join(ignored))} "
+            "(not DeepRacer hyperparameters; DeepRacer ignores them too)"
+        )
+    return hp
 
 
 @app.command()
+@_with_setting_options
 def train(
+    ctx: typer.Context,
     out: Annotated[Path, typer.Option(help="Run folder, e.g. runs/NAME.")],
-    track: Annotated[str, _setting("track")] = _default("track"),
-    direction: Annotated[str | None, _setting("direction")] = _default("direction"),
-    race_type: Annotated[str, _setting("race_type")] = _default("race_type"),
-    sensors: Annotated[str | None, _setting("sensors")] = None,
-    action_space: Annotated[str, _setting("action_space")] = "default",
-    reward_fn: Annotated[str, _setting("reward_fn")] = _default("reward_fn"),
-    minutes: Annotated[float | None, _setting("minutes")] = _default("minutes"),
-    iterations: Annotated[int | None, _setting("iterations")] = _default("iterations"),
+    recipe: Annotated[
+        str | None,
+        typer.Option(
+            help="Start from a named recipe (see --list-recipes); options given here win."
+        ),
+    ] = None,
+    list_recipes: Annotated[
+        bool,
+        typer.Option(
+            "--list-recipes",
+            help="List the recipes and exit.",
+            is_eager=True,
+            callback=_list_recipes,
+        ),
+    ] = False,
     clone: Annotated[Path | None, typer.Option(help="Start from another run's weights.")] = None,
     resume: Annotated[bool, typer.Option(help="Continue the run in --out.")] = False,
-    workers: Annotated[int | None, _setting("workers")] = _default("workers"),
-    races: Annotated[int | None, _setting("races")] = _default("races"),
-    seed: Annotated[int, _setting("seed")] = _default("seed"),
-    network: Annotated[str | None, _setting("network")] = _default("network"),
-    critic: Annotated[str, _setting("critic")] = _default("critic"),
-    teacher: Annotated[str | None, _setting("teacher")] = _default("teacher"),
     hyperparameters: Annotated[
-        Path | None, typer.Option(help="DeepRacer hyperparameters.json.")
+        Path | None, typer.Option(help="DeepRacer hyperparameters.json (wins over a recipe's).")
     ] = None,
-    eval_every: Annotated[int, _setting("eval_every")] = _default("eval_every"),
-    eval_time_limit: Annotated[float, _setting("eval_time_limit")] = _default("eval_time_limit"),
-    selfplay: Annotated[str, _setting("selfplay")] = _default("selfplay"),
-    opponent: Annotated[list[Path] | None, _setting("opponent")] = None,
-    device: Annotated[str, _setting("device")] = _default("device"),
-    threads: Annotated[int, _setting("threads")] = _default("threads"),
+    **settings: Any,
 ) -> None:
     """Train a policy with PPO (rsl-rl), or by imitation (--teacher); Ctrl-C stops cleanly,
     keeping finished work."""
-    # The parameters named after settings fields (locals() holds only parameters here).
-    options = {k: v for k, v in locals().items() if k in TrainSettings.model_fields}
     from pydantic import ValidationError
 
-    from agents.hyperparameters import Hyperparameters
     from agents.train import Trainer
 
-    if minutes is None and iterations is None and not resume:
-        _fail("give --minutes or --iterations")
-    options["device"] = _device(device)
+    # The options given on the command line: they win over a recipe's.
+    given = {
+        name: value
+        for name, value in settings.items()
+        if ctx.get_parameter_source(name).name != "DEFAULT"  # typer's own click enum
+    }
+    given["device"] = _device(settings["device"])
     try:
-        settings = _settings(out, resume, options)
-        hp = None
-        if hyperparameters:
-            hp, ignored = Hyperparameters.read(hyperparameters)
-            if ignored:
-                console.print(
-                    f"[yellow]warning:[/] {escape(str(hyperparameters))}: ignoring "
-                    f"{escape(', '.join(ignored))} (not DeepRacer hyperparameters; "
-                    "DeepRacer ignores them too)"
-                )
-        trainer = Trainer(settings, out, hp, clone=clone, resume=resume)
+        run_settings = _settings(out, recipe, clone, resume, given)
+        if run_settings.minutes is None and run_settings.iterations is None and not resume:
+            _fail("give --minutes or --iterations")
+        hp = _hyperparameters(hyperparameters, recipe)
+        trainer = Trainer(run_settings, out, hp, clone=clone, resume=resume)
     except (ValueError, ValidationError, FileNotFoundError) as exc:
         _fail(str(exc))
+    _train(trainer)
+
+
+def _train(trainer: Any) -> None:
+    """Run ``trainer`` under a progress bar and print how it ended."""
+    settings = trainer.settings
     if settings.race_type == "time_trial" and not set(IMAGE_SENSORS) & set(settings.sensors):
         console.print(
             "[yellow]warning:[/] the lidar sees only cars and boxes, and a time trial has "
@@ -208,13 +233,14 @@ def evaluate_command(
 ) -> None:
     """Race a trained run, print the results table and write a replay GIF."""
     from agents import evaluate
-    from agents.train import load_actor, run_hyperparameters
+    from agents.run import Run
 
     try:
-        actor, settings = load_actor(run)
-        stack_size = run_hyperparameters(run).stack_size
+        trained = Run.load(run)
+        actor = trained.actor()
     except (FileNotFoundError, ValueError) as exc:
         _fail(f"cannot load {run}: {exc}")
+    settings = trained.settings
     raced = settings.model_copy(update={"race_type": race_type or settings.race_type})
     try:
         others = (
@@ -225,17 +251,14 @@ def evaluate_command(
     except (OSError, KeyError, ValueError, zipfile.BadZipFile) as exc:
         _fail(f"cannot load the opponent: {exc}")
     try:
-        config = evaluate.evaluation_config(
-            track or settings.track,
-            raced.race_type,
-            settings.sensors,
-            settings.action_space,
+        config = trained.evaluation_config(
+            track=track or settings.track,
+            race_type=raced.race_type,
             laps=laps,
             seed=seed,
             time_limit_s=time_limit,
             direction=direction
             or (settings.direction if track in (None, settings.track) else None),
-            stack_size=stack_size,
         )
     except ValueError as exc:
         _fail(str(exc))

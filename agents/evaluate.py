@@ -58,7 +58,7 @@ def evaluation_config(
     stack_size: int = 1,
 ) -> RaceConfig:
     """A race-mode config for evaluating one trained policy (``direction``: the file's)."""
-    config = arena.make_config(
+    return arena.make_config(
         track=track,
         direction=direction,
         race_type=race_type,
@@ -69,24 +69,7 @@ def evaluation_config(
         seed=seed,
         laps=laps,
         time_limit_s=time_limit_s,
-    )
-    return with_stack_size(config, stack_size)
-
-
-def run_evaluation_config(settings: TrainSettings, stack_size: int) -> RaceConfig:
-    """The evaluation race of a run's settings: its track and direction, race type, cars,
-    laps, seed and time limit, each car stacking ``stack_size`` frames."""
-    s = settings
-    return evaluation_config(
-        s.track,
-        s.race_type,
-        s.sensors,
-        s.action_space,
-        laps=s.eval_laps,
-        seed=s.seed,
-        time_limit_s=s.eval_time_limit,
         stack_size=stack_size,
-        direction=s.direction,
     )
 
 
@@ -111,14 +94,6 @@ def run_opponent(settings: TrainSettings) -> Any | None:
     if settings.race_type != "head_to_model" or not settings.opponent:
         return None
     return model_opponent(settings.opponent[0], settings)
-
-
-def with_stack_size(config: RaceConfig, stack_size: int) -> RaceConfig:
-    """``config`` with every car's observations stacking ``stack_size`` frames."""
-    if all(car.stack_size == stack_size for car in config.cars):
-        return config
-    cars = tuple(car.model_validate({**dict(car), "stack_size": stack_size}) for car in config.cars)
-    return config.model_copy(update={"cars": cars})
 
 
 def evaluate_policy(

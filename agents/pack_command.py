@@ -1,6 +1,6 @@
 """``slipstream model pack``: a submission from a training run, or from a graph trained elsewhere.
 
-``pack RUN`` packs a Slipstream run's model, its best evaluation's (:func:`agents.train.pack_run`);
+``pack RUN`` packs a Slipstream run's model, its best evaluation's (:meth:`agents.run.Run.pack`);
 ``pack --onnx policy.onnx --metadata model_metadata.json`` takes any trainer's ONNX graph
 and a DeepRacer metadata file, fills Slipstream's section from the graph
 (:func:`submissions.from_graph.derive_section`) and packs them. Either way the archive is
@@ -68,11 +68,11 @@ def _pack_graph(tmp: Path, graph: Path, metadata: Path, extras: dict[str, Any]) 
 
 
 def _pack_run(tmp: Path, run: Path) -> None:
-    from agents.train import pack_run  # torch: only for this form
+    from agents.run import Run  # torch: only for this form
 
     try:
         with console.status(f"exporting the actor of {run} to ONNX..."):
-            pack_run(run, tmp)
+            Run.load(run).pack(tmp)
     except (FileNotFoundError, ValueError) as exc:
         _fail(f"cannot pack the run {run}: {exc}")
 

@@ -1,43 +1,30 @@
 """The settings of a training run: one declaration, one description per field.
 
 Each setting ``slipstream train`` takes is the option of the field's name, with the field's
-description as its help (``agents/cli.py``); the rest (``steps_per_env``, ``eval_laps``,
-``stop_on_clean_eval``, ``snapshot_every``) are for Python callers. A run stores its
-settings as ``RUN/training_settings.json``. This module imports no torch, so the CLI can
-read it at start-up.
+description as its help (``agents/options.py`` says which, and their command-line forms);
+the rest are for Python callers. A run stores its settings as
+``RUN/training_settings.json``. This module imports no torch, so the CLI can read it at
+start-up.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field
 
 from agents.privileged import CriticInput
 from arena.actions import ActionSpace, DiscreteActionSpace
 from arena.config import RACE_TYPES, RaceType
-from arena.sensors_spec import IMAGE_SENSORS
 from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
 # Parallel races per worker process (or in-process) when ``races`` is not given: each step
 # of a worker carries a fixed cost (pipe, pickling, waking it), which two races share
-# (docs/training.md, "The adapter").
+# (measured by benchmarks/train_profile.py --races).
 RACES_PER_WORKER = 2
-# The camera default before ``CPU CNN``: the preset of camera runs stored without one.
-FORMER_CAMERA_PRESET = "3-layer CNN"
-# The critic of runs stored before the ``critic`` setting existed.
-FORMER_CRITIC: CriticInput = "sensors"
-# Names used by ``training_settings.json`` files written before the fields took the
-# command line's names; such files still load.
-_FORMER_NAMES = {
-    "reward": "reward_fn",
-    "opponents": "opponent",
-    "eval_time_limit_s": "eval_time_limit",
-}
 
 
 class TrainSettings(BaseModel):
@@ -108,14 +95,9 @@ class TrainSettings(BaseModel):
     )
     device: str = Field("cpu", description="cpu, cuda or cuda:N.")
     threads: int = Field(1, description="Torch CPU threads.")
-
-    @model_validator(mode="before")
-    @classmethod
-    def _rename_former_fields(cls, data: Any) -> Any:
-        """Read settings files that use the fields' former names."""
-        if isinstance(data, dict) and _FORMER_NAMES.keys() & data.keys():
-            return {_FORMER_NAMES.get(key, key): value for key, value in data.items()}
-        return data
+    recipe: str | None = Field(
+        None, description="The recipe the settings were made from (agents/recipes.py)."
+    )
 
     @property
     def preset(self) -> str:
@@ -143,14 +125,5 @@ def save_settings(run_dir: str | Path, settings: TrainSettings) -> Path:
 
 
 def load_settings(run_dir: str | Path) -> TrainSettings:
-    """The settings a run was started with (``RUN/training_settings.json``).
-
-    Runs store their preset by name; a camera run stored without one was trained when the
-    camera default was ``3-layer CNN``, so it gets that network back. A run stored without
-    a ``critic`` was trained when the critic read the sensors, so it gets that critic.
-    """
-    stored = json.loads(settings_path(run_dir).read_text())
-    settings = TrainSettings.model_validate({"critic": FORMER_CRITIC, **stored})
-    if settings.network is None and set(IMAGE_SENSORS) & set(settings.sensors):
-        return settings.model_copy(update={"network": FORMER_CAMERA_PRESET})
-    return settings
+    """The settings a run was started with (``RUN/training_settings.json``)."""
+    return TrainSettings.model_validate_json(settings_path(run_dir).read_text())

@@ -1,19 +1,5 @@
-"""Train a racing policy with rsl-rl's PPO (or by imitation, ``agents.imitation``) and write
-a run in deepracer-for-cloud's layout.
-
-Run layout (``RUN`` = the output folder)::
-
-    RUN/training_settings.json                      how the run was started (for resume)
-    RUN/ip/hyperparameters.json                     DeepRacer's hyperparameter keys
-    RUN/model/model_metadata.json                   DeepRacer's model metadata
-    RUN/model/model.zip                             the submission file (at the end)
-    RUN/0/training-simtrace/<iteration>-iteration.csv
-    RUN/evaluation-<YYYYMMDDHHMMSS>/evaluation-simtrace/0-iteration.csv
-    RUN/metrics.csv, RUN/reward_graph.png           console-style metrics and graph
-    RUN/metrics/TrainingMetrics.json                DeepRacer's per-episode metrics
-    RUN/training_params.yaml                        WORLD_NAME (the track) and race type
-    RUN/checkpoints/last.pt                         state dicts (torch, weights_only)
-    RUN/tensorboard/                                rsl-rl's TensorBoard events
+"""Train a racing policy with rsl-rl's PPO (or by imitation, ``agents.imitation``) into a
+run folder in deepracer-for-cloud's layout (``agents.run``).
 """
 
 from __future__ import annotations
@@ -33,23 +19,16 @@ import torch
 
 import arena
 from agents import evaluate, export, networks, plots
-from agents.checkpoint import (
-    checkpoint,
-    checkpoint_path,
-    model_checkpoint,
-    read_checkpoint,
-    write_checkpoint,
-)
-from agents.deepracer_metrics import TrainingMetricsLog, write_training_params
+from agents.checkpoint import checkpoint, checkpoint_path, read_checkpoint, write_checkpoint
+from agents.deepracer_metrics import TrainingMetricsLog
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.imitation import imitation_config
 from agents.metrics import IterationStats, append_metrics
-from agents.model_metadata import DeepRacerMetadata, write_model_metadata
-from agents.rewards import resolve_reward
+from agents.run import Run, holds_run
 from agents.runner import RacingRunner
 from agents.selfplay import OpponentPool
-from agents.settings import TrainSettings, load_settings, save_settings
+from agents.settings import TrainSettings
 from agents.vecenv import RacingVecEnv
 from arena.simtrace import write_simtrace
 from tracks.catalog import get_track
@@ -105,49 +84,46 @@ class Trainer:
         clone: str | Path | None = None,
         resume: bool = False,
     ) -> None:
-        self.settings = settings
-        self.run_dir = Path(run_dir)
-        self.hp = hyperparameters or (run_hyperparameters(run_dir) if resume else Hyperparameters())
-        self.clone = Path(clone) if clone else None
+        run_dir = Path(run_dir)
+        stored = Run.load(run_dir) if resume else None
+        hp = hyperparameters or (stored.hyperparameters if stored else Hyperparameters())
+        self.target = Run(run_dir, settings, hp)
+        self.clone = Run.load(clone) if clone else None
         self.resume = resume
-        if not resume and holds_run(self.run_dir):
+        if stored is None and holds_run(run_dir):
             raise ValueError(
-                f"{self.run_dir} already holds a training run: continue it with --resume, "
+                f"{run_dir} already holds a training run: continue it with --resume, "
                 "or give another --out"
             )
-        self.dr_metrics = TrainingMetricsLog(self.run_dir, resume=resume)
+        if stored is not None and stored.stack_size != hp.stack_size:
+            raise ValueError(
+                f"cannot resume {run_dir} with stack_size {hp.stack_size}: "
+                f"its network reads {stored.stack_size} stacked frames"
+            )
+        self.dr_metrics = TrainingMetricsLog(run_dir, resume=resume)
         networks.check_preset(settings.preset, settings.sensors)
         get_track(settings.track)  # raises TrackNotFoundError (a ValueError)
-        resolve_reward(settings.reward_fn, settings.race_type)  # fail early, in this process
-        run_stack = run_hyperparameters(self.run_dir).stack_size if resume else self.hp.stack_size
-        if self.hp.stack_size != run_stack:
-            raise ValueError(
-                f"cannot resume {self.run_dir} with stack_size {self.hp.stack_size}: "
-                f"its network reads {run_stack} stacked frames"
-            )
+        self.target.reward  # noqa: B018 (resolved here: a broken reward fails early)
         self.start_iteration = 0
         self.elapsed_before = 0.0
         self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
         self.eval_opponent = evaluate.run_opponent(settings) if self.writes_run_folder else None
-        self.best_score = _best_score(self.run_dir) if resume else None
+        self.best_score = stored.best_score() if stored else None
 
-    # ------------------------------------------------------------------ setup
-    def _write_run_files(self) -> None:
-        s = self.settings
-        self.run_dir.mkdir(parents=True, exist_ok=True)
-        save_settings(self.run_dir, s.model_copy(update={"network": s.preset}))  # never re-derived
-        self.hp.write(self.run_dir)
-        lidar = arena.CarConfig(name="car0").lidar_config
-        meta = DeepRacerMetadata(
-            action_space=s.action_space,
-            sensors=s.sensors,
-            neural_network=networks.deepracer_network_name(s.preset),
-            lidar_config=lidar if any("sector" in x for x in s.sensors) else None,
-        )
-        (self.run_dir / "model").mkdir(exist_ok=True)
-        write_model_metadata(self.run_dir / "model" / "model_metadata.json", meta)
-        reverse = s.direction not in (None, get_track(s.track).direction)
-        write_training_params(self.run_dir, s.track, s.race_type, reverse)
+    @property
+    def settings(self) -> TrainSettings:
+        """The settings the run trains with."""
+        return self.target.settings
+
+    @property
+    def hp(self) -> Hyperparameters:
+        """The run's DeepRacer hyperparameters."""
+        return self.target.hyperparameters
+
+    @property
+    def run_dir(self) -> Path:
+        """The run folder."""
+        return self.target.path
 
     def _make_env(self) -> tuple[RacingVecEnv, OpponentPool | None]:
         s = self.settings
@@ -159,8 +135,8 @@ class Trainer:
             action_space=s.action_space,
             mode="training",
             seed=s.seed + 100_003 * _rank(),
+            stack_size=self.hp.stack_size,
         )
-        config = evaluate.with_stack_size(config, self.hp.stack_size)
         pool = None
         learners = None
         if s.race_type == "head_to_model" and (s.selfplay == "pool" or s.opponent):
@@ -198,16 +174,16 @@ class Trainer:
             self.start_iteration = int(ckpt["iteration"]) + 1
             self.elapsed_before = float(ckpt["elapsed_s"])
         elif self.clone is not None:
-            ckpt = read_checkpoint(self.clone, runner.device, model_checkpoint(self.clone))
+            ckpt = self.clone.checkpoint(runner.device)
             # A critic that reads other inputs than this run's cannot be reused: a fresh one
             # (an imitation run has none).
-            same_critic = load_settings(self.clone).critic == self.settings.critic
+            same_critic = self.clone.settings.critic == self.settings.critic
             same_critic = same_critic and "critic_state_dict" in ckpt
             try:
                 runner.alg.load(ckpt, {"actor": True, "critic": same_critic}, strict=True)
             except RuntimeError as exc:
                 raise ValueError(
-                    f"cannot clone {self.clone}: its network does not match this run's "
+                    f"cannot clone {self.clone.path}: its network does not match this run's "
                     "(same sensors, network preset and number of actions are needed)"
                 ) from exc
 
@@ -241,7 +217,7 @@ class Trainer:
         torch.set_num_threads(self.settings.threads)
         torch.manual_seed(self.settings.seed + _rank())
         if self.writes_run_folder:
-            self._write_run_files()
+            self.target.write()
         env, pool = self._make_env()
         result = TrainResult(self.run_dir)
         try:
@@ -378,12 +354,12 @@ class Trainer:
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
         """Race the greedy policy (race mode; head to model: against the run's first
         ``--opponent``) and write the evaluation simtrace."""
-        s = self.settings
-        config = evaluate.run_evaluation_config(s, self.hp.stack_size)
-        policy = evaluate.TorchPolicy(runner.alg.get_policy(), s.discrete)
-        reward = resolve_reward(s.reward_fn, s.race_type)
+        policy = evaluate.TorchPolicy(runner.alg.get_policy(), self.settings.discrete)
         race = evaluate.evaluate_policy(
-            config, policy, reward_function=reward, opponent=self.eval_opponent
+            self.target.evaluation_config(),
+            policy,
+            reward_function=self.target.reward,
+            opponent=self.eval_opponent,
         )
         runner.alg.train_mode()
         evaluate.write_evaluation(self.run_dir, race, training_log=self.dr_metrics)
@@ -407,75 +383,4 @@ class Trainer:
         return export.export_onnx(policy, s.sensors, s.action_space, stack_size=self.hp.stack_size)
 
     def _package(self) -> Path:
-        return pack_run(self.run_dir, self.run_dir / "model" / "model.zip")
-
-
-def _load_run(run_dir: str | Path, device: str) -> tuple[torch.nn.Module, TrainSettings, dict]:
-    """A run's model: its actor (weights of ``checkpoints/best.pt``, else ``last.pt``),
-    settings and that checkpoint."""
-    settings = load_settings(run_dir)
-    stack_size = run_hyperparameters(run_dir).stack_size
-    actor = networks.build_actor(
-        settings.preset, settings.sensors, settings.action_space, stack_size=stack_size
-    )
-    checkpoint = read_checkpoint(run_dir, device, model_checkpoint(run_dir))
-    actor.load_state_dict(checkpoint["actor_state_dict"])
-    return actor.to(device).eval(), settings, checkpoint
-
-
-def load_actor(run_dir: str | Path, device: str = "cpu") -> tuple[torch.nn.Module, TrainSettings]:
-    """A run's trained actor (its best evaluation's, else the last) and its settings."""
-    actor, settings, _ = _load_run(run_dir, device)
-    return actor, settings
-
-
-def pack_run(run_dir: str | Path, out: str | Path) -> Path:
-    """Pack a run's model (its best evaluation's weights, else the last) as a submission
-    at ``out`` (not validated here).
-
-    The archive holds the exported actor, the run's DeepRacer metadata, its reward file
-    when it still exists, ``metrics.csv`` and a training summary (with the best lap of the
-    packed weights' evaluation).
-    """
-    run_dir = Path(run_dir)
-    actor, s, ckpt = _load_run(run_dir, "cpu")
-    stack_size = run_hyperparameters(run_dir).stack_size
-    reward = Path(s.reward_fn)
-    metrics = run_dir / "metrics.csv"
-    return export.pack_model(
-        out,
-        export.export_onnx(actor, s.sensors, s.action_space, stack_size=stack_size),
-        s.action_space,
-        s.sensors,
-        neural_network=networks.deepracer_network_name(s.preset),
-        network_preset=s.preset,
-        lidar=None,
-        training_summary={
-            "track": s.track,
-            "race_type": s.race_type,
-            "iterations": int(ckpt["iteration"]) + 1,  # up to the packed weights
-            "minutes": round(float(ckpt["elapsed_s"]) / 60.0, 2),
-            **({"best_lap": ckpt["eval_best_lap"]} if ckpt.get("eval_best_lap") else {}),
-        },
-        reward_source=reward.read_text() if reward.suffix == ".py" and reward.is_file() else None,
-        metrics_csv=metrics if metrics.is_file() else None,
-        stack_size=stack_size,
-    )
-
-
-def _best_score(run_dir: Path) -> tuple[float, ...] | None:
-    """The evaluation score kept with a run's ``best.pt`` (None without one)."""
-    if not checkpoint_path(run_dir, "best").exists():
-        return None
-    return tuple(read_checkpoint(run_dir, which="best")["eval_score"])
-
-
-def holds_run(run_dir: Path) -> bool:
-    """Whether ``run_dir`` already holds a run's metrics or checkpoint."""
-    return (run_dir / "metrics.csv").exists() or checkpoint_path(run_dir).exists()
-
-
-def run_hyperparameters(run_dir: str | Path) -> Hyperparameters:
-    """A run's hyperparameters (``RUN/ip/hyperparameters.json``; defaults if it has none)."""
-    path = Path(run_dir) / "ip" / "hyperparameters.json"
-    return Hyperparameters.load(path) if path.exists() else Hyperparameters()
+        return self.target.pack(self.target.model_zip)

@@ -33,10 +33,12 @@ def make_config(
     mode: str = "race",
     seed: int = 0,
     direction: str | None = None,
+    stack_size: int = 1,
     **rules: Any,
 ) -> RaceConfig:
     """Build a :class:`RaceConfig` from the common keyword settings.
 
+    Every car stacks ``stack_size`` frames of each sensor in its observations.
     ``num_cars`` defaults to 1 (2 for head-to-model); obstacles and bots get their
     default sections for object-avoidance and head-to-bot races unless given in
     ``rules`` (any other :class:`RaceConfig` field: ``laps``, ``penalties``, ...).
@@ -45,7 +47,7 @@ def make_config(
         num_cars = 2 if race_type == "head_to_model" else 1
     if not isinstance(num_cars, int) or isinstance(num_cars, bool):
         raise ConfigError(f"num_cars must be a whole number, got {num_cars!r}")
-    car: dict[str, Any] = {"sensors": tuple(sensors)}
+    car: dict[str, Any] = {"sensors": tuple(sensors), "stack_size": stack_size}
     if action_space is not None:
         car["action_space"] = action_space
     cars = [{"name": f"car{i}", **car} for i in range(num_cars)]

@@ -6,7 +6,8 @@ from pathlib import Path
 
 import torch
 
-from agents.train import Trainer, load_actor
+from agents.run import Run
+from agents.train import Trainer
 
 
 def assert_clone_takes_the_actor(trainer: Trainer, parent: Path) -> None:
@@ -16,7 +17,7 @@ def assert_clone_takes_the_actor(trainer: Trainer, parent: Path) -> None:
     try:
         runner = trainer._make_runner(env)
         trainer._load_weights(runner)
-        expected, _ = load_actor(parent)
+        expected = Run.load(parent).actor()
         cloned = runner.alg.get_policy().state_dict()
         for key, value in expected.state_dict().items():
             assert torch.equal(cloned[key], value), key

@@ -14,8 +14,9 @@ from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
 from agents.hyperparameters import Hyperparameters
 from agents.imitation import EXPERT_GROUP
+from agents.run import Run
 from agents.settings import TrainSettings
-from agents.train import Trainer, load_actor
+from agents.train import Trainer
 from agents.vecenv import RacingVecEnv
 from tests.agents.clones import assert_clone_takes_the_actor
 
@@ -91,7 +92,7 @@ def test_a_camera_student_learns_what_the_teacher_does_where_it_drives(tmp_path)
     )
     hp = Hyperparameters(num_epochs=5, batch_size=64, lr=1e-3)
     Trainer(settings, tmp_path / "run", hp).run()
-    actor, _ = load_actor(tmp_path / "run")
+    actor = Run.load(tmp_path / "run").actor()
     error, variance = _student_error(actor)
     assert error < 0.5 * variance, (error, variance)
 

@@ -1,9 +1,8 @@
-"""TrainSettings: one declaration the ``train`` command maps one to one; old files still load."""
+"""TrainSettings: one declaration the ``train`` command's options are generated from."""
 
 from __future__ import annotations
 
 import inspect
-import json
 
 import pytest
 import typer
@@ -12,11 +11,13 @@ from typer.core import TyperOption
 
 from agents.action_spaces import parse_action_space_spec
 from agents.cli import app, train
+from agents.hyperparameters import Hyperparameters
+from agents.options import PYTHON_ONLY, option_names, settings_from_options
 from agents.settings import RESUME_OVERRIDES, TrainSettings, load_settings, save_settings
 
 SPACE = parse_action_space_spec("3x3@1.0")
-NOT_SETTINGS = {"out", "clone", "resume", "hyperparameters"}
-# Options whose command-line form differs from the field's type (parsed by agents.cli).
+NOT_SETTINGS = {"out", "recipe", "list_recipes", "clone", "resume", "hyperparameters"}
+# Options whose command-line form differs from the field's type (agents.options).
 PARSED = {"sensors", "action_space", "opponent"}
 
 
@@ -32,7 +33,9 @@ def test_every_field_is_documented():
 
 def test_train_options_are_the_settings_fields_by_name_with_their_docs():
     options = _train_options()
-    assert set(inspect.signature(train).parameters) == set(options)
+    assert set(inspect.signature(train).parameters) == set(options) | {"ctx"}
+    assert set(options) - NOT_SETTINGS == set(option_names())
+    assert set(TrainSettings.model_fields) - set(option_names()) == set(PYTHON_ONLY)
     for name, option in options.items():
         if name in NOT_SETTINGS:
             continue
@@ -44,24 +47,17 @@ def test_train_options_are_the_settings_fields_by_name_with_their_docs():
 
 
 def test_command_line_forms_map_to_the_fields(tmp_path, monkeypatch):
-    from agents import cli
-
     reward = tmp_path / "reward.py"
     reward.write_text("def reward_function(params):\n    return 1.0\n")
     monkeypatch.chdir(tmp_path)
     options = {
-        name: TrainSettings.model_fields[name].default
-        for name in TrainSettings.model_fields
-        if name in _train_options()
+        "sensors": "camera, lidar",
+        "action_space": "3x3@1.0",
+        "reward_fn": "reward.py",
+        "opponent": ["a.onnx"],
+        "iterations": 3,
     }
-    options.update(
-        sensors="camera, lidar",
-        action_space="3x3@1.0",
-        reward_fn="reward.py",
-        opponent=["a.onnx"],
-        iterations=3,
-    )
-    settings = cli._settings(tmp_path / "run", False, options)
+    settings = settings_from_options(options)
     assert settings.sensors == ("camera", "lidar") and settings.action_space == SPACE
     assert settings.reward_fn == str(reward.resolve())
     assert settings.opponent == (str(tmp_path / "a.onnx"),)
@@ -72,8 +68,7 @@ def test_resume_keeps_the_run_settings_but_the_overrides(tmp_path):
     from agents import cli
 
     save_settings(tmp_path, TrainSettings(action_space=SPACE, seed=7, minutes=30.0, threads=2))
-    options = dict.fromkeys(TrainSettings.model_fields) | {"iterations": 2, "threads": 1}
-    settings = cli._settings(tmp_path, True, options)
+    settings = cli._settings(tmp_path, None, None, True, {"iterations": 2, "seed": 1})
     assert settings.seed == 7 and settings.action_space == SPACE
     assert settings.iterations == 2 and settings.minutes is None and settings.threads == 1
 
@@ -84,38 +79,11 @@ def test_settings_round_trip(tmp_path):
     assert load_settings(tmp_path) == settings
 
 
-def test_settings_files_with_the_former_field_names_still_load(tmp_path):
-    current = TrainSettings(
-        action_space=SPACE,
-        reward_fn="/r.py",
-        opponent=("/m.zip",),
-        eval_time_limit=9.0,
-        network="CPU CNN",
-    )
-    data = json.loads(current.model_dump_json())
-    for old, new in (
-        ("reward", "reward_fn"),
-        ("opponents", "opponent"),
-        ("eval_time_limit_s", "eval_time_limit"),
-    ):
-        data[old] = data.pop(new)
-    (tmp_path / "training_settings.json").write_text(json.dumps(data))
-    assert load_settings(tmp_path) == current
-
-
-def test_camera_runs_stored_without_a_preset_keep_the_former_default(tmp_path):
-    """Such runs were trained when the camera default was the 3-layer CNN."""
-    save_settings(tmp_path, TrainSettings(action_space=SPACE, sensors=("camera",)))
-    assert load_settings(tmp_path).network == "3-layer CNN"
-    save_settings(tmp_path, TrainSettings(action_space=SPACE, sensors=("lidar",)))
-    assert load_settings(tmp_path).preset == "dense 256-256"
-
-
 def test_new_runs_store_their_preset_by_name(tmp_path):
-    from agents.train import Trainer
+    from agents.run import Run
 
     settings = TrainSettings(action_space=SPACE, sensors=("camera",), workers=0)
-    Trainer(settings, tmp_path)._write_run_files()
+    Run(tmp_path, settings, Hyperparameters()).write()
     assert load_settings(tmp_path).network == "CPU CNN"
 
 

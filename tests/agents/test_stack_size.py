@@ -13,8 +13,9 @@ from agents import evaluate
 from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
 from agents.hyperparameters import Hyperparameters
+from agents.run import Run
 from agents.settings import load_settings
-from agents.train import Trainer, load_actor, run_hyperparameters
+from agents.train import Trainer
 from arena.config import CarConfig, RaceConfig
 from arena.race import run_race
 from submissions import load_policy, validate
@@ -49,7 +50,7 @@ def test_hyperparameters_take_stack_sizes_1_to_8(tmp_path: Path) -> None:
 
 
 def test_the_packed_model_declares_the_stack(run: Path) -> None:
-    assert run_hyperparameters(run).stack_size == 3
+    assert Run.load(run).stack_size == 3
     report = validate(run / "model" / "model.zip")
     assert report.ok, report.problems
     assert report.info is not None and report.info.stack_size == 3
@@ -58,13 +59,10 @@ def test_the_packed_model_declares_the_stack(run: Path) -> None:
 
 
 def test_the_run_evaluates_and_resumes_with_its_stack(run: Path) -> None:
-    actor, settings = load_actor(run)
-    config = evaluate.evaluation_config(
-        settings.track, settings.race_type, settings.sensors, SPACE, laps=1, time_limit_s=1.0
-    )
-    stacked = evaluate.with_stack_size(config, 3)
+    trained = Run.load(run)
+    stacked = trained.evaluation_config(laps=1, time_limit_s=1.0)
     assert [c.stack_size for c in stacked.cars] == [3]
-    policy = evaluate.TorchPolicy(actor, settings.discrete)
+    policy = evaluate.TorchPolicy(trained.actor(), trained.settings.discrete)
     race = evaluate.evaluate_policy(stacked, policy)
     assert race.car("car0").status == "time_up"
     assert Trainer(load_settings(run), run, resume=True, hyperparameters=None).hp.stack_size == 3

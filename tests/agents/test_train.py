@@ -19,9 +19,10 @@ from agents.cli import app
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.privileged import PRIVILEGED_SIZE
+from agents.run import Run
 from agents.selfplay import read_policy_graph
 from agents.settings import TrainSettings, load_settings, settings_path
-from agents.train import Trainer, load_actor
+from agents.train import Trainer
 from agents.vecenv import RacingVecEnv
 from tests.agents.clones import assert_clone_takes_the_actor
 
@@ -80,7 +81,7 @@ def test_ppo_beats_a_random_policy(tmp_path):
     )
     settings = _settings(races=2, iterations=6, steps_per_env=128, reward_fn=str(reward))
     Trainer(settings, tmp_path / "run", hp).run()
-    actor, _ = load_actor(tmp_path / "run")
+    actor = Run.load(tmp_path / "run").actor()
     gen = torch.Generator().manual_seed(1)
 
     def random_act(obs):
@@ -314,7 +315,7 @@ def test_the_packed_model_is_the_best_evaluation_s_and_resume_keeps_it(tmp_path,
     assert (best["iteration"], last["iteration"]) == (2, 3) and not scripted
     assert best["eval_score"] == list(_eval(100.0, 0, 40.0).score)
 
-    actor, _ = load_actor(run)
+    actor = Run.load(run).actor()
     for key, value in actor.state_dict().items():
         assert torch.equal(value, best["actor_state_dict"][key]), key
     assert any(

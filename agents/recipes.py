@@ -1,0 +1,154 @@
+"""Named training recipes: how each race type is trained (``slipstream train --recipe``).
+
+A recipe is a set of ``train`` options in their command-line forms (``agents/options.py``)
+and DeepRacer hyperparameters. Options given on the command line win over the recipe's,
+and an explicit ``hyperparameters.json`` replaces the recipe's hyperparameters. How well
+each recipe drives after a fixed budget: ``benchmarks/race_quality.py`` and
+``benchmarks/time_to_lap.py`` (results in ``benchmarks/RESULTS.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from agents.hyperparameters import Hyperparameters
+from agents.options import settings_from_options
+from agents.settings import TrainSettings
+
+# Continuous steering of +-30 degrees at 0.5 to 4 m/s: room to learn the racing line.
+RACING_ACTIONS = "continuous:-30:30:0.5:4"
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """One way of training: ``train`` options (command-line forms) and hyperparameters."""
+
+    name: str
+    summary: str  # one line, for ``--list-recipes``
+    options: Mapping[str, Any]
+    hyperparameters: Mapping[str, Any] = field(default_factory=dict)
+    # The recipe of the run this one clones (``--clone``); that run's model is the opponent.
+    parent: str | None = None
+
+    def hyperparameters_model(self) -> Hyperparameters:
+        """The recipe's hyperparameters (DeepRacer's defaults for those it does not set)."""
+        return Hyperparameters(**self.hyperparameters)
+
+    def settings(
+        self, explicit: Mapping[str, Any] | None = None, **python_only: Any
+    ) -> TrainSettings:
+        """The settings this recipe trains with, ``explicit`` options (command-line forms)
+        winning; the recipe's name is recorded in them."""
+        options = {**self.options, **(explicit or {})}
+        return settings_from_options(options, recipe=self.name, **python_only)
+
+
+def parent_model(parent_run: Path) -> Path:
+    """The packed model of the run a recipe with a ``parent`` clones (its opponent)."""
+    path = parent_run / "model" / "model.zip"
+    if not path.is_file():
+        raise ValueError(f"{parent_run} has no model/model.zip to race against: train it first")
+    return path
+
+
+# Evaluations of the race-type recipes stop after 60 simulated seconds: 3 laps of a car worth
+# measuring take well under that, and a car stuck behind a box costs no training minutes.
+_RACE_TYPE_EVALS = {"workers": 2, "eval_time_limit": 60.0}
+
+RECIPES: dict[str, Recipe] = {
+    recipe.name: recipe
+    for recipe in (
+        Recipe(
+            name="time_trial",
+            summary="beginner_loop, camera, continuous 0.5-4 m/s; imitates the pursuit driver",
+            options={
+                "race_type": "time_trial",
+                "track": "beginner_loop",
+                "sensors": "camera",
+                "action_space": RACING_ACTIONS,
+                "reward_fn": "pursuit",
+                "teacher": "pursuit",
+                **_RACE_TYPE_EVALS,
+            },
+        ),
+        Recipe(
+            name="object_avoidance",
+            summary="slipstream_speedway (room beside a box), camera + lidar; imitates the "
+            "pursuit driver around 6 random boxes",
+            options={
+                "race_type": "object_avoidance",
+                "track": "slipstream_speedway",
+                "sensors": "camera,lidar",  # the lidar sees boxes and cars, never the road
+                "action_space": RACING_ACTIONS,
+                "reward_fn": "object_avoidance",
+                "teacher": "pursuit",
+                **_RACE_TYPE_EVALS,
+            },
+        ),
+        Recipe(
+            name="head_to_bot",
+            summary="beginner_loop, camera + lidar, continuous 0.5-3 m/s; imitates the "
+            "pursuit driver among bot cars",
+            options={
+                "race_type": "head_to_bot",
+                "track": "beginner_loop",
+                "sensors": "camera,lidar",
+                "action_space": "continuous:-30:30:0.5:3",
+                "reward_fn": "head_to_head",
+                "teacher": "pursuit",
+                **_RACE_TYPE_EVALS,
+            },
+        ),
+        Recipe(
+            name="head_to_model",
+            summary="needs --clone of a time_trial run; races a pool of its own snapshots and "
+            "that run's model, imitating the passing pursuit driver",
+            options={
+                "race_type": "head_to_model",
+                "track": "beginner_loop",
+                "sensors": "camera",  # the parent's: a clone needs its sensors and preset
+                "action_space": RACING_ACTIONS,  # and its number of actions
+                "reward_fn": "head_to_head",
+                "teacher": "pursuit",
+                "selfplay": "pool",
+                **_RACE_TYPE_EVALS,
+            },
+            parent="time_trial",
+        ),
+        Recipe(
+            name="first_laps",
+            summary="fast start: PPO from scratch, camera, 3x3 discrete at 1 m/s, "
+            "follow_center_line, cheap updates; clean laps in about a minute",
+            options={
+                "race_type": "time_trial",
+                "track": "beginner_loop",
+                "sensors": "camera",
+                "action_space": "3x3@1.0",
+                "reward_fn": "follow_center_line",
+                "workers": 0,
+                "races": 1,
+                "eval_every": 4,
+                "eval_time_limit": 240.0,  # 3 laps at the slowest speed (1/3 m/s) fit
+            },
+            # 512 steps an iteration, 2 epochs of batch 64: cheap updates on a 2-core CPU.
+            hyperparameters={
+                "num_episodes_between_training": 8,
+                "batch_size": 64,
+                "num_epochs": 2,
+                "discount_factor": 0.99,
+                "lr": 5e-4,
+            },
+        ),
+    )
+}
+
+
+def get_recipe(name: str) -> Recipe:
+    """The recipe called ``name``; a ValueError listing the recipes otherwise."""
+    try:
+        return RECIPES[name]
+    except KeyError:
+        raise ValueError(f"no recipe {name!r}; recipes: {', '.join(RECIPES)}") from None
