@@ -135,7 +135,7 @@ class Trainer:
             action_space=s.action_space,
             mode="training",
             seed=s.seed + 100_003 * _rank(),
-            stack_size=self.hp.stack_size,
+            stack_size=self.target.stack_size,
         )
         pool = None
         learners = None
@@ -380,7 +380,9 @@ class Trainer:
     def _graph(self, runner: RacingRunner) -> bytes:
         s = self.settings
         policy = runner.alg.get_policy()
-        return export.export_onnx(policy, s.sensors, s.action_space, stack_size=self.hp.stack_size)
+        return export.export_onnx(
+            policy, s.sensors, s.action_space, stack_size=self.target.stack_size
+        )
 
     def _package(self) -> Path:
         return self.target.pack(self.target.model_zip)

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from agents import cli
 from agents.hyperparameters import Hyperparameters
+from agents.options import settings_from_options
 from agents.settings import TrainSettings
 from slipstream.cli import app
 
@@ -32,30 +32,30 @@ def _metadata(tmp_path: Path, **keys: object) -> Path:
     return path
 
 
-def _options(action_space: Path | str, sensors: str | None = None) -> dict:
-    options = {name: field.default for name, field in TrainSettings.model_fields.items()}
-    return options | {"action_space": str(action_space), "sensors": sensors, "iterations": 1}
+def _settings(action_space: Path | str, sensors: str | None = None) -> TrainSettings:
+    options = {"action_space": str(action_space), "sensors": sensors, "iterations": 1}
+    return settings_from_options(options)
 
 
 def test_the_metadata_files_sensors_are_trained(tmp_path: Path) -> None:
     meta = _metadata(tmp_path, sensor=["FRONT_FACING_CAMERA", "LIDAR"])
-    settings = cli._settings(tmp_path / "run", False, _options(meta))
+    settings = _settings(meta)
     assert settings.sensors == ("camera", "lidar")
 
 
 def test_agreeing_sensors_are_accepted_in_any_order(tmp_path: Path) -> None:
     meta = _metadata(tmp_path, sensor=["FRONT_FACING_CAMERA", "LIDAR"])
-    settings = cli._settings(tmp_path / "run", False, _options(meta, "lidar,camera"))
+    settings = _settings(meta, "lidar,camera")
     assert set(settings.sensors) == {"camera", "lidar"}
 
 
 def test_a_file_without_sensor_means_deepracers_camera(tmp_path: Path) -> None:
-    settings = cli._settings(tmp_path / "run", False, _options(_metadata(tmp_path)))
+    settings = _settings(_metadata(tmp_path))
     assert settings.sensors == ("camera",)
 
 
 def test_without_a_metadata_file_the_default_is_the_camera(tmp_path: Path) -> None:
-    assert cli._settings(tmp_path / "run", False, _options("3x3@1.0")).sensors == ("camera",)
+    assert _settings("3x3@1.0").sensors == ("camera",)
 
 
 def test_conflicting_sensors_are_an_error_naming_both(tmp_path: Path) -> None:
