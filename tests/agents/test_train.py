@@ -21,7 +21,7 @@ from agents.hyperparameters import Hyperparameters
 from agents.privileged import PRIVILEGED_SIZE
 from agents.run import Run
 from agents.selfplay import read_policy_graph
-from agents.settings import TrainSettings, load_settings, settings_path
+from agents.settings import TrainSettings, load_settings
 from agents.train import Trainer
 from agents.vecenv import RacingVecEnv
 from tests.agents.clones import assert_clone_takes_the_actor
@@ -126,16 +126,6 @@ def test_a_privileged_critic_trains_resumes_clones_and_exports_a_sensor_only_mod
     trainer = Trainer(privileged, tmp_path / "clone", TINY, clone=tmp_path / "sensors")
     # the actor only: the parent's critic reads lidar
     assert_clone_takes_the_actor(trainer, tmp_path / "sensors")
-
-
-def test_a_run_stored_before_the_critic_setting_resumes_with_its_sensor_critic(tmp_path):
-    Trainer(_settings(iterations=1, critic="sensors"), tmp_path, TINY).run()
-    stored = json.loads(settings_path(tmp_path).read_text())
-    del stored["critic"]  # as written before the setting existed
-    settings_path(tmp_path).write_text(json.dumps(stored))
-    settings = load_settings(tmp_path)
-    assert settings.critic == "sensors"
-    Trainer(settings, tmp_path, TINY, resume=True).run()  # strict load of the sensor critic
 
 
 def test_ctrl_c_keeps_the_last_finished_iteration(tmp_path):
