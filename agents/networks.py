@@ -59,7 +59,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 def default_preset(sensors: tuple[str, ...] | list[str]) -> str:
     """``CPU CNN`` when a camera is fitted (it trains on a CPU in a tenth of the time of
-    DeepRacer's ``3-layer CNN``: docs/training.md), else ``dense 256-256``."""
+    DeepRacer's ``3-layer CNN``: benchmarks/RESULTS.md), else ``dense 256-256``."""
     return "CPU CNN" if any(s in IMAGE_SENSORS for s in sensors) else "dense 256-256"
 
 

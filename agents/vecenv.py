@@ -39,15 +39,15 @@ from arena.simtrace import simtrace_row, step_facts
 # Head to model: how far from a racing rival a restarted car starts, metres along the track,
 # in the other lane. A learner restarts behind its rival and ahead of it in turn (an
 # opponent the other way round), so that it practises both following and leading at its
-# own pace: restarted behind every time, the learner cloned from a time-trial model saw
-# clear track so rarely that it forgot how to drive it fast (runs/rq16 in
-# docs/training.md, "Recipes per race type": 5.7-6.0 s laps when leading, 5.5-5.7 s
-# following).
+# own pace: a learner that only ever restarts behind rarely sees a clear track and
+# forgets how to drive it fast (benchmarks/RESULTS.md, "Which races a head-to-model
+# learner wins").
 PASS_GAP_M = 1.0
 # Every GRID_EVERY-th restart of a learner racing frozen opponents is instead a standing
 # start on a fresh grid, the learner in the back slot, as a race starts it from behind: its
 # first training grid puts it in front, and restarts near a rival that is already racing
-# never practise the standing start that races from behind lose most on (docs/training.md).
+# never practise the standing start that races from behind lose most on
+# (benchmarks/RESULTS.md, "Standing grid starts in training").
 GRID_EVERY = 4
 
 

@@ -163,8 +163,8 @@ def test_fast_renderer_matches_pybullet_on_an_oval() -> None:
     0.5, diffuse 0.63, no specular, no shadows), and the fast renderer samples pixels
     where TinyRenderer does (pixel corners), so the two agree pixel for pixel.
     Tolerance: mean absolute difference <= 0.5 gray levels and >= 99.5 % of pixels
-    within 2 levels. Measured (2026-11, PyBullet 3.2.7): mean 0.000, 100.0 % within 2,
-    i.e. identical images (also on reinvent_base, 18 frames with boxes).
+    within 2 levels. With PyBullet 3.2.7 the images are identical: mean 0.000, 100.0 % within 2
+    (also on reinvent_base, 18 frames with boxes).
     """
     mad, within = _agreement(oval(), stereo_too=True)
     assert mad <= 0.5
