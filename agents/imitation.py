@@ -4,7 +4,7 @@
 instead of PPO (rsl-rl's :class:`~rsl_rl.algorithms.Distillation`): the student drives
 with its own sensors (sampling from its action distribution, so it visits the states
 its mistakes lead to), and in every state the teacher says what it would have done.
-The teacher is :class:`agents.pursuit.PassingPursuitPolicy`, pure pursuit on the track's
+The teacher is :class:`arena.pursuit.PassingPursuitPolicy`, pure pursuit on the track's
 racing line at its speed profile that steers around boxes and cars: it reads DeepRacer's
 params, which the student never sees. Its actions are computed in the env workers and
 travel as the observation group :data:`EXPERT_GROUP`, which :class:`ExpertModel` hands to
@@ -26,8 +26,8 @@ import torch.nn as nn
 from rsl_rl.algorithms import Distillation
 from tensordict import TensorDict
 
-from agents.pursuit import PassingPursuitPolicy
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
+from arena.pursuit import PassingPursuitPolicy
 from tracks.track import Track
 
 # The observation group that carries the teacher's action for each learner slot.

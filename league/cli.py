@@ -73,8 +73,8 @@ def serve(
 
     import uvicorn
 
-    from league.app import create_app
     from league.db import make_engine
+    from league.http.app import create_app
     from league.migrations import upgrade
 
     settings = _settings(data_dir)
@@ -88,7 +88,7 @@ def serve(
         return
     if data_dir is not None:
         os.environ["SLIPSTREAM_DATA_DIR"] = str(data_dir.resolve())
-    uvicorn.run("league.app:create_app", factory=True, workers=workers, **options)
+    uvicorn.run("league.http.app:create_app", factory=True, workers=workers, **options)
 
 
 @app.command("create-racer")
@@ -267,8 +267,8 @@ def scheduler(data_dir: DataDir = None) -> None:
     import logging
 
     from league.db import make_engine
+    from league.jobs.scheduler import Scheduler
     from league.migrations import upgrade
-    from league.scheduler import Scheduler
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     settings = _settings(data_dir)
@@ -286,7 +286,7 @@ def worker(
     import logging
     import os
 
-    from league.worker import supervise
+    from league.jobs.worker import supervise
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     if data_dir is not None:

@@ -1,7 +1,7 @@
 """Database writes shared by the API, the CLI and the workers: racers, events, models, races.
 
 Standings and ratings live in :mod:`league.ranking`, job leases and completion in
-:mod:`league.queue`; an event's ruleset is frozen by :mod:`league.rulesets`.
+:mod:`league.jobs.queue`; an event's ruleset is frozen by :mod:`league.rulesets`.
 """
 
 from __future__ import annotations
@@ -15,12 +15,12 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from league.auth import hash_token, new_token, revoked_hash
+from league.jobs.queue import evaluation_jobs
 from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, utcnow
-from league.queue import evaluation_jobs
 from league.rulesets import event_config
 from league.schemas import EventCreate
-from league.storage import FileStore
+from league.store.base import FileStore
+from league.tokens import hash_token, new_token, revoked_hash
 from submissions import ModelInfo
 
 if TYPE_CHECKING:
@@ -183,7 +183,7 @@ def record_race(
     (trace, bots, obstacles and the overtake and contact events), the job it ran for.
 
     ``entries`` maps car names to the entries that drove them (bots have none). The job's
-    own state is the queue's (:func:`league.queue.claim_done`). With ``commit=False`` the
+    own state is the queue's (:func:`league.jobs.queue.claim_done`). With ``commit=False`` the
     rows join the caller's transaction (workers commit once).
     """
     trace = json.dumps(result.replay_data(), separators=(",", ":")).encode()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
@@ -48,12 +48,6 @@ def make_engine(url: str, busy_timeout_ms: int = 5000) -> Engine:
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:
     """Sessions that keep loaded attributes after commit (responses are built afterwards)."""
     return sessionmaker(engine, expire_on_commit=False)
-
-
-def session_scope(factory: sessionmaker[Session]) -> Iterator[Session]:
-    """Yield one session and close it afterwards (a FastAPI dependency body)."""
-    with factory() as session:
-        yield session
 
 
 def scratch_schema(base_url: str, prefix: str) -> tuple[str, Callable[[], None]]:

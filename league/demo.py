@@ -55,7 +55,7 @@ def demo_events(round_interval_s: int) -> list[EventCreate]:
 
 def print_tracks(console: Console, out: Path) -> None:
     """The built-in tracks with their yardstick lap times; a picture of the first."""
-    from agents.pursuit import car_limits
+    from arena.pursuit import car_limits
     from tracks.catalog import builtin_names, get_track
     from tracks.plot import plot_track
     from tracks.raceline import centerline_profile, compute_racing_line
@@ -157,10 +157,6 @@ def _enter_samples(url: str, tokens: dict[str, str], events: list[int]) -> None:
             model = client.upload_model(path, name=f"{alias}-{Path(sample).stem}")
             for event in events:
                 client.enter(event, model["id"])
-
-
-def _board_rows(url: str, event: int) -> int:
-    return len(httpx.get(f"{url}/api/events/{event}/leaderboard", timeout=10).json()["rows"])
 
 
 def _races(url: str, event: int) -> int:

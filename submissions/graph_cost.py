@@ -4,7 +4,7 @@ Shapes come from ONNX shape inference with data propagation, without running any
 Symbolic dimensions count as 1 (the batch); a value whose shape inference cannot know is
 not counted. So this is a floor, cheap enough to refuse the obvious bombs before
 onnxruntime folds them; what it cannot see is caught by the limits of the process that
-builds the session (``league.validation``).
+builds the session (``league.http.upload_validation``).
 """
 
 from __future__ import annotations

@@ -190,8 +190,3 @@ def signed_area(ring: np.ndarray) -> float:
     """Shoelace area of a ring: positive when its vertices run counter-clockwise."""
     x, y = ring[:, 0], ring[:, 1]
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-
-
-def wrap_angle(angle: np.ndarray | float) -> np.ndarray | float:
-    """Wrap radians into ``(-pi, pi]``."""
-    return np.pi - np.mod(np.pi - np.asarray(angle), 2.0 * np.pi)

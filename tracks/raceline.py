@@ -35,9 +35,9 @@ class CarLimits:
     ``max_brake`` (4 m/s^2) stays just under the 0.5 g friction limit.
 
     The simulated car is ``arena.car_spec.CarSpec``, which this layer cannot import:
-    ``agents.pursuit.car_limits`` builds the limits of a race's car from it (top speed,
+    ``arena.pursuit.car_limits`` builds the limits of a race's car from it (top speed,
     width). These defaults serve ``tracks`` used on its own (``slipstream tracks``) and
-    equal that car's limits, which ``tests/agents/test_pursuit.py`` checks.
+    equal that car's limits, which ``tests/arena/test_pursuit.py`` checks.
     """
 
     max_speed: float = 4.0

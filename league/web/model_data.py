@@ -12,8 +12,8 @@ from fastapi import APIRouter, HTTPException, Path
 from pydantic import BaseModel
 from sqlalchemy.orm import Session
 
-from league.api.deps import SessionDep, StorageDep
-from league.auth import CurrentRacer
+from league.http.auth import CurrentRacer
+from league.http.deps import SessionDep, StorageDep
 from league.models import Model, Racer
 from league.schemas import MAX_ID, ErrorOut
 from league.web.queries import ModelRace, model_races

@@ -2,7 +2,7 @@
 
 Pages are server-rendered shells; public data is filled in here or fetched by the page's
 script from the JSON API. The public pages are rendered once per results version and
-answered with an ETag (``league.read_cache``); time-dependent parts (countdowns) are
+answered with an ETag (``league.http.read_cache``); time-dependent parts (countdowns) are
 computed in the browser from absolute times, and a page whose events open or close
 expires at that moment. Private data (a racer's models) is only fetched by the scripts,
 with the token the racer stored in their browser.
@@ -21,8 +21,7 @@ from markupsafe import Markup
 from sqlalchemy.orm import selectinload
 
 from league.head_to_head import head_to_head
-from league.models import Event, Race, utcnow
-from league.read_cache import (
+from league.http.read_cache import (
     Prepared,
     answer,
     event_version,
@@ -30,6 +29,7 @@ from league.read_cache import (
     prepared,
     race_version,
 )
+from league.models import Event, Race, utcnow
 from league.schemas import MAX_ID
 from league.web import TEMPLATES_DIR
 from league.web.queries import event_cards, seconds_left, thumbnail

@@ -28,11 +28,11 @@ from agents import evaluate
 from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
 from agents.hyperparameters import Hyperparameters
-from agents.pursuit import PurePursuitPolicy
 from agents.rewards import resolve_reward
 from agents.settings import TrainSettings
 from agents.train import Trainer
 from arena.config import resolve_track
+from arena.pursuit import PurePursuitPolicy
 from tracks.catalog import get_track, import_track
 
 TRACK = "cw_test_loop"

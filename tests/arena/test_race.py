@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 
 from agents.action_spaces import continuous_action_space
-from agents.pursuit import PurePursuitPolicy
 from arena.cli import print_results
 from arena.config import RaceConfig, resolve_track
+from arena.pursuit import PurePursuitPolicy
 from arena.race import RaceResult, run_race
 from arena.spawn import GRID_GAP_M
 

@@ -7,8 +7,8 @@ import pytest
 
 import arena
 from agents.action_spaces import continuous_action_space
-from agents.pursuit import PurePursuitPolicy
 from arena.config import RaceConfig, resolve_track
+from arena.pursuit import PurePursuitPolicy
 from arena.race import run_race
 from arena.spawn import (
     RESPAWN_CLEARANCE_M,

@@ -10,9 +10,9 @@ import pytest
 
 import arena
 from agents.action_spaces import continuous_action_space
-from agents.pursuit import PurePursuitPolicy
 from arena.config import NO_VARIATION, RaceConfig, resolve_track
 from arena.env import RacingEnv
+from arena.pursuit import PurePursuitPolicy
 from arena.race import run_race
 from arena.spawn import grid_slots, start_arc
 

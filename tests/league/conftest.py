@@ -24,11 +24,11 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from arena.actions import default_discrete_space
 from league import crud
-from league.app import create_app
 from league.db import make_engine, make_session_factory, scratch_schema
+from league.http.app import create_app
 from league.migrations import upgrade
 from league.settings import Settings
-from league.storage import Storage
+from league.store.local import LocalFileStore
 from submissions import pack
 from tests.prerequisites import postgres_url
 
@@ -132,7 +132,7 @@ class League:
     url: str
     settings: Settings
     sessions: sessionmaker[Session]
-    storage: Storage
+    storage: LocalFileStore
     backend: str
     tokens: dict[str, str]
     ids: dict[str, int]
@@ -167,7 +167,7 @@ def start_league(database: Database, data_dir: Path, **overrides: object) -> Ite
             url=server.url,
             settings=settings,
             sessions=sessions,
-            storage=Storage(settings.storage_dir),
+            storage=LocalFileStore(settings.storage_dir),
             backend=database.backend,
             tokens=tokens,
             ids=ids,

@@ -10,9 +10,9 @@ from sqlalchemy.orm import Session
 
 from arena.config import RaceConfig
 from arena.race import CarResult, RaceResult
+from league.jobs.queue import Lease, lease_job, release
+from league.jobs.worker import record_result
 from league.models import Event, Job, Model
-from league.queue import Lease, lease_job, release
-from league.worker import record_result
 from tests.league.conftest import League, make_model_zip
 
 LEASE_S = 60.0

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import arena
-from league.evaluation import CarPlan, RacePlan, policies
+from league.jobs.evaluation import CarPlan, RacePlan, policies
 from submissions import NonFiniteOutput, load_policy
 from tests.league_ops.hostile import nan_onnx
 from tests.submissions.test_support import pack_bytes

@@ -15,7 +15,7 @@ from urllib.parse import urljoin, urlsplit
 
 import pytest
 
-from league.security import CONTENT_SECURITY_POLICY
+from league.http.security import CONTENT_SECURITY_POLICY
 from tests.league.conftest import UPLOAD_LIMIT, Database, League, start_league
 from tests.league.helpers import car, create_event, enter, record, upload
 

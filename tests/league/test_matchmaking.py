@@ -6,7 +6,7 @@ import random
 from collections import Counter
 from itertools import combinations
 
-from league.matchmaking import Candidate, pair, pairings, plan_round
+from league.jobs.matchmaking import Candidate, pair, pairings, plan_round
 from league.ranking import initial_skill
 
 START_SIGMA = initial_skill().sigma

@@ -8,8 +8,8 @@ from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
 from sqlalchemy import inspect, text
 
-from league.app import create_app
 from league.db import make_engine
+from league.http.app import create_app
 from league.migrations import alembic_config, current_revision, head_revision, is_current, upgrade
 from league.models import Base
 from league.settings import Settings

@@ -8,11 +8,11 @@ import httpx
 from sqlalchemy import update
 
 from league import crud
-from league.app import create_app
 from league.db import make_engine, make_session_factory
+from league.http.app import create_app
+from league.http.ratelimit import TokenBucket
 from league.migrations import upgrade
 from league.models import Racer
-from league.ratelimit import TokenBucket
 from league.settings import Settings
 from tests.league.conftest import ServerThread, free_port
 

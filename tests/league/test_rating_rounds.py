@@ -18,15 +18,15 @@ from pathlib import Path
 
 import pytest
 
-from agents.pursuit import PurePursuitPolicy
 from arena.actions import default_discrete_space
 from arena.config import RaceConfig, resolve_track
 from arena.policy import Policy
+from arena.pursuit import PurePursuitPolicy
 from arena.race import run_race
-from league.evaluation import car_name
-from league.matchmaking import Candidate, pairings, plan_round
+from league.jobs.evaluation import car_name
+from league.jobs.matchmaking import Candidate, pairings, plan_round
+from league.jobs.scheduler import round_seeds
 from league.ranking import Skill, initial_skill, rate
-from league.scheduler import round_seeds
 from submissions import load_policy, pack
 from tests.league.conftest import CREATED_AT, policy_onnx
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from league.read_cache import Prepared, ReadCache
+from league.http.read_cache import Prepared, ReadCache
 from league.web import queries
 from tests.league.conftest import League, free_port
 from tests.league.helpers import car, create_event, enter, record, upload

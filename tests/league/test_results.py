@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from sqlalchemy import func, select
 
+from league.jobs.queue import evaluation_jobs, release
+from league.jobs.worker import record_result
 from league.models import Event, Job, Race
-from league.queue import evaluation_jobs, release
-from league.worker import record_result
 from tests.league.conftest import League
 from tests.league.helpers import car, create_event, enter, lease, race_result, record, upload
 

@@ -26,13 +26,14 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from league import crud
 from league.db import make_engine, make_session_factory
+from league.jobs.worker import Worker
 from league.migrations import upgrade
 from league.models import Event, Job
 from league.schemas import EventCreate
-from league.storage import DigestMismatch, StorageError, open_storage
-from league.storage_s3 import S3Storage
-from league.sweep import sweep
-from league.worker import Worker
+from league.store import open_storage
+from league.store.base import DigestMismatch, StorageError
+from league.store.s3 import S3FileStore
+from league.store.sweep import sweep
 from submissions import validate
 from tests.league.conftest import Database, make_model_zip, start_league
 from tests.league.helpers import car, create_event, enter, race_result, upload
@@ -62,10 +63,10 @@ class S3Server:
             "region_name": REGION,
         }
 
-    def storage(self, prefix: str, bucket: str = BUCKET, secret: str | None = None) -> S3Storage:
+    def storage(self, prefix: str, bucket: str = BUCKET, secret: str | None = None) -> S3FileStore:
         """The backend on ``s3://bucket/prefix``."""
         url = f"s3://{bucket}/{prefix}"
-        return S3Storage(url, endpoint_url=self.endpoint, **self.credentials(secret))
+        return S3FileStore(url, endpoint_url=self.endpoint, **self.credentials(secret))
 
     def keys(self, prefix: str) -> list[str]:
         """Every object key under ``prefix`` (read with the plain client)."""
@@ -180,7 +181,7 @@ def test_an_unreachable_endpoint_is_a_storage_error() -> None:
     from tests.league.conftest import free_port
 
     endpoint = f"http://127.0.0.1:{free_port()}"
-    storage = S3Storage(
+    storage = S3FileStore(
         f"s3://{BUCKET}", endpoint_url=endpoint, region_name=REGION,
         aws_access_key_id="k", aws_secret_access_key="s",
     )  # fmt: skip
@@ -195,7 +196,7 @@ def test_readiness_probe_writes_and_deletes_a_small_object(s3: S3Server) -> None
 
 
 def _reference(
-    sessions: sessionmaker[Session], storage: S3Storage, folder: Path
+    sessions: sessionmaker[Session], storage: S3FileStore, folder: Path
 ) -> tuple[str, str]:
     """A model row and a race row referring to stored files; their sha256s."""
     data = make_model_zip(folder, seed=3).read_bytes()
@@ -270,7 +271,7 @@ def test_a_league_on_object_storage_stores_models_and_traces_there(
     data_dir = tmp_path / "data"
     options = {"storage_url": f"s3://{BUCKET}/{prefix}", "s3_endpoint_url": s3.endpoint}
     for league in start_league(database, data_dir, **options):
-        assert isinstance(open_storage(league.settings), S3Storage)
+        assert isinstance(open_storage(league.settings), S3FileStore)
         model = upload(league, "alice", seed=1)
         model_sha = hashlib.sha256(make_model_zip(league.models_dir, 1).read_bytes()).hexdigest()
         event = create_event(league, name="Bucket Cup", laps=1, time_limit_s=20.0, seeds=[0])

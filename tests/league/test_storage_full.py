@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from sqlalchemy import func, select
 
-from league.api.health import STORAGE_PROBE_MAX_AGE_S
+from league.http.routes.health import STORAGE_PROBE_MAX_AGE_S
 from league.models import Model
 from tests.diskfull import fill, small_tmpfs
 from tests.league.conftest import Database, League, make_model_zip, start_league

@@ -17,8 +17,8 @@ from league.migrations import upgrade
 from league.models import Event
 from league.schemas import EventCreate
 from league.settings import Settings
-from league.storage import Storage
-from league.sweep import sweep
+from league.store.local import LocalFileStore
+from league.store.sweep import sweep
 from submissions import validate
 from tests.league.conftest import Database, League, make_model_zip, start_league
 from tests.league.helpers import car, race_result
@@ -33,7 +33,7 @@ def _age(path: Path, seconds: float) -> Path:
     return path
 
 
-def _orphan(storage: Storage, kind: str, content: bytes) -> Path:
+def _orphan(storage: LocalFileStore, kind: str, content: bytes) -> Path:
     """A stored-looking file that no row refers to."""
     path = storage.path(kind, hashlib.sha256(content).hexdigest())
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -46,7 +46,7 @@ def _referenced(database: Database, data_dir: Path) -> tuple[Path, Path]:
     settings = Settings(data_dir=data_dir, database_url=database.url)
     engine = make_engine(settings.db_url)
     upgrade(engine)
-    storage = Storage(settings.storage_dir)
+    storage = LocalFileStore(settings.storage_dir)
     with make_session_factory(engine)() as session:
         owner, _ = crud.create_racer(session, "carol")
         data = make_model_zip(data_dir.parent / "uploads", seed=7).read_bytes()
@@ -73,7 +73,7 @@ def swept(
 ) -> Iterator[tuple[League, dict[str, Path]]]:
     """A store seeded with leftovers of every kind, then a server started on it."""
     data_dir = tmp_path_factory.mktemp("league") / "data"
-    storage = Storage(data_dir / "files")
+    storage = LocalFileStore(data_dir / "files")
     model_file, trace_file = _referenced(database, data_dir)
     files = {
         "stale temp": _age(_temp(model_file.parent, ".tmp-k1ll3d"), HOUR),
@@ -120,7 +120,7 @@ def test_a_file_stored_again_during_the_grace_period_is_kept(
 def test_a_database_that_refers_to_no_files_sweeps_none(tmp_path: Path) -> None:
     engine = make_engine(f"sqlite:///{tmp_path / 'empty.db'}")  # the wrong, empty database
     upgrade(engine)
-    storage = Storage(tmp_path / "files")
+    storage = LocalFileStore(tmp_path / "files")
     files = [_age(_orphan(storage, kind, b"a file"), HOUR) for kind in ("models", "traces")]
     report = sweep(make_session_factory(engine), storage, grace_s=600)
     engine.dispose()

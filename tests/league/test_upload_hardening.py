@@ -17,10 +17,10 @@ import httpx
 import pytest
 
 from league import crud
+from league.http.upload_validation import UploadValidator
 from league.models import Racer
 from league.settings import Settings
-from league.storage import Storage
-from league.validation import UploadValidator
+from league.store.local import LocalFileStore
 from submissions import ValidationReport, validate
 from tests.league.conftest import Database, League, start_league
 from tests.league.helpers import model_rows
@@ -116,7 +116,7 @@ def _validation_children() -> list[int]:
     for task in Path("/proc/self/task").glob("*/children"):
         for pid in task.read_text().split():
             cmdline = Path(f"/proc/{pid}/cmdline")
-            if cmdline.exists() and b"league.validation" in cmdline.read_bytes():
+            if cmdline.exists() and b"league.http.upload_validation" in cmdline.read_bytes():
                 found.append(int(pid))
     return found
 
@@ -154,8 +154,8 @@ def test_same_file_twice_at_once_gives_one_model(league: League) -> None:
         assert answers[0].json()["id"] == answers[1].json()["id"]
 
 
-class RivalCommitsFirst(Storage):
-    """Storage whose ``put`` lets a rival request store the same upload before returning:
+class RivalCommitsFirst(LocalFileStore):
+    """A local store whose ``put`` lets a rival request store the same upload before returning:
     the moment two identical uploads race between the duplicate check and the commit."""
 
     def __init__(self, league: League, rival_info: object) -> None:
@@ -165,7 +165,7 @@ class RivalCommitsFirst(Storage):
     def put(self, kind: str, data: bytes) -> tuple[str, bool]:
         with self.league.sessions() as rival:
             owner = rival.get(Racer, self.league.ids["alice"])
-            crud.add_model(rival, Storage(self.root), owner, "rival", data, self.rival_info)
+            crud.add_model(rival, LocalFileStore(self.root), owner, "rival", data, self.rival_info)
         return super().put(kind, data)
 
 

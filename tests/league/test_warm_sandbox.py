@@ -14,9 +14,9 @@ import pytest
 
 import arena
 from arena.config import RaceConfig
-from league.evaluation import CarPlan, RacePlan, decode_plan, encode_plan
-from league.sandbox import SandboxError, SandboxLimits, WarmSandbox, run_limited
-from league.worker import answer_request, race_answer
+from league.jobs.evaluation import CarPlan, RacePlan, decode_plan, encode_plan
+from league.jobs.sandbox import SandboxError, SandboxLimits, WarmSandbox, run_limited
+from league.jobs.worker import answer_request, race_answer
 from submissions import InvalidSubmission, load_policy
 from tests.league.conftest import policy_onnx
 from tests.submissions.hostile_models import broadcast_bomb

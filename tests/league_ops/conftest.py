@@ -22,7 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from league.db import make_engine, make_session_factory, scratch_schema
 from league.migrations import upgrade
 from league.settings import Settings
-from league.storage import Storage
+from league.store.local import LocalFileStore
 from tests.prerequisites import postgres_url
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -38,7 +38,7 @@ class Ops:
     data_dir: Path
     engine: Engine
     sessions: sessionmaker[Session]
-    storage: Storage
+    storage: LocalFileStore
     settings: Settings
     procs: list[subprocess.Popen] = field(default_factory=list)
 
@@ -51,9 +51,10 @@ class Ops:
         return env
 
     def start(self, module: str, name: str, **extra: object) -> subprocess.Popen:
-        """Start ``python -m league.<module>``; output goes to ``<data>/<name>.log``."""
+        """Start ``python -m league.jobs.<module>`` (``worker`` or ``scheduler``); output
+        goes to ``<data>/<name>.log``."""
         log = (self.data_dir / f"{name}.log").open("ab")
-        args = [sys.executable, "-m", f"league.{module}"]
+        args = [sys.executable, "-m", f"league.jobs.{module}"]
         args += ["--name", name] if module == "worker" else []
         proc = subprocess.Popen(
             args, cwd=ROOT, env=self.env(**extra), stdout=log, stderr=subprocess.STDOUT
@@ -86,7 +87,7 @@ def ops(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[Ops]:
         data_dir,
         engine,
         make_session_factory(engine),
-        Storage(settings.storage_dir),
+        LocalFileStore(settings.storage_dir),
         settings,
     )
     yield ops

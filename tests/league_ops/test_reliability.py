@@ -22,9 +22,9 @@ from sqlalchemy import func, make_url, select
 from arena.config import RaceConfig
 from arena.race import run_race
 from league import ranking
-from league.evaluation import build_plan, policies
+from league.jobs.evaluation import build_plan, policies
+from league.jobs.scheduler import Scheduler
 from league.models import Job, Race, Rating, utcnow
-from league.scheduler import Scheduler
 from tests.league_ops.conftest import Ops
 from tests.league_ops.helpers import (
     all_settled,

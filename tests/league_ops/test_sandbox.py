@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from league.sandbox import SandboxError, SandboxLimits, run_limited
+from league.jobs.sandbox import SandboxError, SandboxLimits, run_limited
 
 QUICK = SandboxLimits(memory_mb=256, cpu_seconds=2, wall_seconds=2.0)
 

@@ -11,11 +11,11 @@ from datetime import timedelta
 
 from sqlalchemy import select, update
 
-from league.matchmaking import Candidate, plan_round
+from league.jobs.matchmaking import Candidate, plan_round
+from league.jobs.scheduler import Scheduler, round_seeds
+from league.jobs.worker import Worker
 from league.models import Entry, Event, Job, utcnow
 from league.ranking import initial_skill
-from league.scheduler import Scheduler, round_seeds
-from league.worker import Worker
 from tests.league_ops.conftest import Ops
 from tests.league_ops.helpers import enter, event, model, racer, statuses, wait_until
 

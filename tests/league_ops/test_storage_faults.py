@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from sqlalchemy import func, select
 
+from league.jobs.worker import Worker
 from league.models import Job, Race
-from league.worker import Worker
 from tests.diskfull import fill, small_tmpfs
 from tests.league_ops.conftest import Ops
 from tests.league_ops.helpers import enter, event, model, racer, wait_until

@@ -10,10 +10,10 @@ from sqlalchemy import func, select
 
 from arena.config import RaceConfig
 from arena.race import run_race
-from league.evaluation import build_plan, policies
+from league.jobs.evaluation import build_plan, policies
+from league.jobs.queue import claim_done, expire_leases, fail_job, heartbeat, lease_job
+from league.jobs.worker import Worker
 from league.models import Job, Race, RaceCar, utcnow
-from league.queue import claim_done, expire_leases, fail_job, heartbeat, lease_job
-from league.worker import Worker
 from tests.league_ops.conftest import Ops
 from tests.league_ops.helpers import enter, event, model, racer, statuses
 from tests.league_ops.hostile import memory_onnx, nan_onnx, slow_onnx

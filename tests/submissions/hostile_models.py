@@ -4,7 +4,8 @@ Each is a valid lidar MLP archive (so it passes the archive, metadata and I/O ch
 something costly folded into its output: the cost hides in constants that onnxruntime
 folds while it builds the session. ``hidden=True`` routes the constants' shapes through
 ``Abs`` and ``Cast`` so static shape inference cannot see the sizes, leaving the cost to the
-validation child's limits. Shared by the tests and ``benchmarks/hostile_uploads.py``.
+validation child's limits. ``benchmarks/hostile_uploads.py`` has its own builders
+(``benchmarks/hostile_models.py``): benchmarks do not import the tests.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ from onnx import TensorProto, helper
 
 from arena.config import CarConfig, RaceConfig
 from arena.race import run_race
-from league.evaluation import model_car
+from league.jobs.evaluation import model_car
 from submissions import load_policy, validate
 from submissions.preflight import preflight
 from tests.submissions.test_support import (

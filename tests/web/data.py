@@ -7,10 +7,10 @@ from pathlib import Path
 from typing import Any
 
 from agents.action_spaces import continuous_action_space
-from agents.pursuit import PurePursuitPolicy
 from arena.actions import default_discrete_space
 from arena.config import NO_VARIATION, RaceConfig, resolve_track
 from arena.drivers import LaneFollowerPolicy, nearest_action
+from arena.pursuit import PurePursuitPolicy
 from arena.race import RaceResult, run_race
 from league import crud
 from league.models import Event

@@ -24,7 +24,7 @@ import boto3
 from botocore.config import Config
 from botocore.exceptions import BotoCoreError, ClientError, NoCredentialsError
 
-from league.storage import (
+from league.store.base import (
     KINDS,
     PROBE_BYTES,
     SHA256,
@@ -53,7 +53,7 @@ def _code(exc: ClientError) -> str:
     return str(exc.response.get("Error", {}).get("Code", ""))
 
 
-class S3Storage(FileStore):
+class S3FileStore(FileStore):
     """The object store at ``url`` (``s3://bucket/prefix``), through ``endpoint_url`` when
     not AWS S3; ``client_options`` go to ``boto3.client`` (credentials, region)."""
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from fastapi import APIRouter, HTTPException, Response
 
 from league import crud
-from league.api.deps import SessionDep
-from league.auth import AdminRacer, CurrentRacer, invalid_token
+from league.http.auth import AdminRacer, CurrentRacer, invalid_token
+from league.http.deps import SessionDep
 from league.schemas import ErrorOut, RacerCreate, RacerCreated, RacerOut
 
 router = APIRouter(prefix="/api/racers", tags=["racers"])

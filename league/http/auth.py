@@ -1,57 +1,23 @@
-"""API tokens: 32 random bytes shown once, stored only as their sha256 (or, once revoked,
-as a value no token hashes to).
-
-FastAPI dependencies resolve the bearer token to a :class:`~league.models.Racer`:
+"""Who is calling: FastAPI dependencies that resolve the bearer token to a
+:class:`~league.models.Racer` (through :func:`league.tokens.racer_for_token`):
 ``current_racer`` (401 without a valid token), ``optional_racer`` and ``admin_racer``
 (401 anonymous, 403 for a racer).
 """
 
 from __future__ import annotations
 
-import hashlib
-import hmac
-import secrets
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from sqlalchemy import select
-from sqlalchemy.orm import Session
 
-from league.api.deps import SessionDep
+from league.http.deps import SessionDep
 from league.models import Racer
+from league.tokens import racer_for_token
 
 bearer = HTTPBearer(
     auto_error=False, description="The API token from `create-racer` or `rotate-token`."
 )
-
-
-def new_token() -> str:
-    """A fresh random API token (URL-safe text)."""
-    return secrets.token_urlsafe(32)
-
-
-def hash_token(token: str) -> str:
-    """The stored form of a token: hex sha256."""
-    return hashlib.sha256(token.encode("utf-8", "surrogatepass")).hexdigest()
-
-
-def revoked_hash() -> str:
-    """A stored token hash that no token matches, for a revoked token.
-
-    ``hash_token`` only yields hex digits; this value starts with ``revoked:``, so no
-    digest ever equals it, and its random part keeps the unique column unique.
-    """
-    return "revoked:" + secrets.token_urlsafe(32)
-
-
-def racer_for_token(session: Session, token: str) -> Racer | None:
-    """The racer holding ``token``, or None; the final comparison is constant-time."""
-    digest = hash_token(token)
-    racer = session.scalar(select(Racer).where(Racer.token_hash == digest))
-    if racer is None or not hmac.compare_digest(racer.token_hash, digest):
-        return None
-    return racer
 
 
 def invalid_token() -> HTTPException:

@@ -7,8 +7,8 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Path
 from sqlalchemy import select
 
-from league.api.deps import SessionDep
-from league.auth import CurrentRacer
+from league.http.auth import CurrentRacer
+from league.http.deps import SessionDep
 from league.models import Entry, Job, Race
 from league.schemas import MAX_ID, ErrorOut, JobOut
 

@@ -22,9 +22,9 @@ from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from league.db import make_engine, make_session_factory
-from league.matchmaking import Candidate, pairings, plan_round
+from league.jobs.matchmaking import Candidate, pairings, plan_round
+from league.jobs.queue import DB_ERRORS, Backoff, evaluation_jobs, expire_leases, insert_jobs
 from league.models import Entry, Event, Job, Rating, utcnow
-from league.queue import DB_ERRORS, Backoff, evaluation_jobs, expire_leases, insert_jobs
 from league.ranking import initial_skill, leaderboard, standing_row
 from league.settings import Settings
 
@@ -106,7 +106,7 @@ def _round_busy(session: Session, event_id: int) -> bool:
 def start_round(session: Session, event: Event, now: datetime, settings: Settings) -> int:
     """Claim the event's due round and queue its races; the number of jobs queued.
 
-    Grids come from :func:`league.matchmaking.plan_round` (pairings of the previous round
+    Grids come from :func:`league.jobs.matchmaking.plan_round` (pairings of the previous round
     damped), seeds from :func:`round_seeds`.
     """
     due = event.next_round_at
@@ -239,7 +239,7 @@ class Scheduler:
 
 
 def main() -> None:
-    """``python -m league.scheduler``: the daemon with settings from the environment."""
+    """``python -m league.jobs.scheduler``: the daemon with settings from the environment."""
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     Scheduler(Settings()).run_forever()
 

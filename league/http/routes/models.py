@@ -22,11 +22,11 @@ from pydantic import TypeAdapter, ValidationError
 from sqlalchemy import select
 
 from league import crud
-from league.api.deps import SessionDep, SettingsDep, StorageDep
-from league.auth import CurrentRacer, OptionalRacer
+from league.http.auth import CurrentRacer, OptionalRacer
+from league.http.deps import SessionDep, SettingsDep, StorageDep
+from league.http.upload_validation import RETRY_AFTER_SECONDS, UploadValidator, ValidationBusy
 from league.models import Model, Racer
 from league.schemas import MAX_ID, ErrorOut, ModelName, ModelOut
-from league.validation import RETRY_AFTER_SECONDS, UploadValidator, ValidationBusy
 
 router = APIRouter(prefix="/api/models", tags=["models"])
 ModelId = Annotated[int, Path(ge=1, le=MAX_ID)]

@@ -4,11 +4,11 @@ A process killed mid-upload or mid-race can leave a ``.tmp-*`` file, or a stored
 row never committed. At start the server removes both, but only those last modified more
 than a grace period ago: in a deployment of several processes a younger file may be a write
 in progress elsewhere. A candidate orphan is taken out of reach first, then looked up again
-(:meth:`league.storage.FileStore.remove_orphan`); it goes back if a row now refers to it or
+(:meth:`league.store.base.FileStore.remove_orphan`); it goes back if a row now refers to it or
 it was stored again meanwhile (``put`` marks a file it finds fresh), so a file whose row is
 being written right now is kept. A database that refers to no file of a kind at all (a
 fresh one, or the wrong one) sweeps none of that kind. The store may be a local directory
-or an object-storage bucket: this module only speaks :class:`league.storage.FileStore`.
+or an object-storage bucket: this module only speaks :class:`league.store.base.FileStore`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from league.models import Model, Race
-from league.storage import FileStore
+from league.store.base import FileStore
 
 log = logging.getLogger("slipstream.sweep")
 REFERENCES = {"models": Model.sha256, "traces": Race.trace_sha256}

@@ -8,12 +8,12 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
 from sqlalchemy import select
 
 from league import crud
-from league.api.deps import SessionDep
-from league.auth import AdminRacer, CurrentRacer
 from league.head_to_head import HeadToHead, head_to_head
+from league.http.auth import AdminRacer, CurrentRacer
+from league.http.deps import SessionDep
+from league.http.read_cache import Prepared, answer, event_version, prepared
 from league.models import Event, Model, utcnow
 from league.ranking import leaderboard, standing_row
-from league.read_cache import Prepared, answer, event_version, prepared
 from league.schemas import (
     MAX_ID,
     EntryAccepted,
@@ -120,7 +120,7 @@ async def read_leaderboard(event_id: EventId, request: Request) -> Response:
     metrics (overtakes, times overtaken, at-fault collisions, laps led, gap to the winner),
     score, submissions; head-to-head events add mu, sigma and the conservative ordinal.
 
-    Built once per results_version of the event (``league.read_cache``), answered with an
+    Built once per results_version of the event (``league.http.read_cache``), answered with an
     ETag; ``If-None-Match`` with the current one answers 304.
     """
     version = event_version(request, event_id)

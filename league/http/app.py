@@ -12,16 +12,17 @@ from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from league.api import events, health, jobs, models, racers, races, tracks
-from league.bodylimit import BodyLimitMiddleware, BodyRule
 from league.db import make_engine, make_session_factory
-from league.ratelimit import RateLimitMiddleware
-from league.read_cache import ReadCache
-from league.security import SecurityHeadersMiddleware
+from league.http.bodylimit import BodyLimitMiddleware, BodyRule
+from league.http.ratelimit import RateLimitMiddleware
+from league.http.read_cache import ReadCache
+from league.http.routes import events, health, jobs, models, racers, races, tracks
+from league.http.security import SecurityHeadersMiddleware
+from league.http.upload_validation import UploadValidator
 from league.settings import Settings
-from league.storage import StorageError, open_storage
-from league.sweep import sweep
-from league.validation import UploadValidator
+from league.store import open_storage
+from league.store.base import StorageError
+from league.store.sweep import sweep
 from league.web import STATIC_DIR
 from league.web import docs as web_docs
 from league.web import model_data as web_model_data

@@ -9,15 +9,15 @@ import pytest
 
 import arena
 from agents.action_spaces import continuous_action_space, parse_action_space_spec
-from agents.pursuit import (
+from arena.car_spec import DEFAULT_CAR, CarSpec
+from arena.config import SeedVariation
+from arena.pursuit import (
     DEFAULT_LIMITS,
     PassingPursuitPolicy,
     PurePursuitPolicy,
     car_limits,
     racing_line_for,
 )
-from arena.car_spec import DEFAULT_CAR, CarSpec
-from arena.config import SeedVariation
 from arena.race import run_race
 from tracks.catalog import get_track
 from tracks.raceline import CarLimits, compute_racing_line

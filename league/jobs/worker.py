@@ -1,17 +1,18 @@
 """Evaluation workers: lease a job, race it in the sandbox, record the result exactly once.
 
-One worker process runs one race at a time and is single-threaded (it forks the race
-child, so it must be). Races run in a warm sandbox child (:class:`league.sandbox.WarmSandbox`)
-forked once and reused for up to :data:`RACES_PER_CHILD` races, each under its own limits
-and in a fresh env. ``slipstream league worker --concurrency N`` runs a small supervisor
-that starts N such processes (``python -m league.worker``) with one BLAS/OpenMP thread each
-and restarts any that die. While a race runs the worker heartbeats its lease; the result,
-its per-car rows, the trace and the rating update are written in one transaction that
-begins by marking the job done *if this lease still holds it*, so a worker whose lease
-expired can never record a second result. A result whose trace cannot be stored (disk full,
-read-only) fails that attempt with the ``OSError`` on the job, which is requeued while
-attempts remain; the worker carries on. A model file that no longer matches its sha256 is
-not raced: its job fails.
+One worker process runs one race at a time and is single-threaded (it forks the race child,
+so it must be). Races run in a warm sandbox child
+(:class:`league.jobs.sandbox.WarmSandbox`) forked once and reused for up to
+:data:`RACES_PER_CHILD` races, each under its own limits and in a fresh env.
+``slipstream league worker --concurrency N`` runs a small supervisor that starts N such
+processes (``python -m league.jobs.worker``) with one BLAS/OpenMP thread each and restarts
+any that die. While a race runs the worker heartbeats its lease; the result, its per-car
+rows, the trace and the rating update are written in one transaction that begins by marking
+the job done *if this lease still holds it*, so a worker whose lease expired can never
+record a second result. A result whose trace cannot be stored (disk full, read-only) fails
+that attempt with the ``OSError`` on the job, which is requeued while attempts remain; the
+worker carries on. A model file that no longer matches its sha256 is not raced: its job
+fails.
 """
 
 from __future__ import annotations
@@ -33,9 +34,8 @@ from sqlalchemy.orm import Session
 from arena.race import RaceResult, run_race
 from league import crud
 from league.db import make_engine, make_session_factory
-from league.evaluation import RacePlan, build_plan, decode_plan, encode_plan, policies
-from league.models import Entry, Event, Job, Race
-from league.queue import (
+from league.jobs.evaluation import RacePlan, build_plan, decode_plan, encode_plan, policies
+from league.jobs.queue import (
     DB_ERRORS,
     Backoff,
     Lease,
@@ -45,10 +45,12 @@ from league.queue import (
     heartbeat,
     lease_job,
 )
+from league.jobs.sandbox import SandboxError, SandboxLimits, WarmSandbox, one_thread_env
+from league.models import Entry, Event, Job, Race
 from league.ranking import rate_race
-from league.sandbox import SandboxError, SandboxLimits, WarmSandbox, one_thread_env
 from league.settings import Settings
-from league.storage import FileStore, StorageError, open_storage
+from league.store import open_storage
+from league.store.base import FileStore, StorageError
 
 log = logging.getLogger("slipstream.worker")
 RACES_PER_CHILD = 50
@@ -67,7 +69,7 @@ def race_answer(plan: RacePlan) -> dict[str, Any]:
 
 
 def answer_request(request: bytes) -> dict[str, Any]:
-    """The warm child's handler: race the plan :func:`league.evaluation.encode_plan` wrote."""
+    """The warm child's handler: race the plan :func:`league.jobs.evaluation.encode_plan` wrote."""
     return race_answer(decode_plan(request))
 
 
@@ -81,7 +83,7 @@ def record_result(
     """Store a leased job's race, its cars, trace and ratings in one transaction; commit.
 
     The transaction begins by marking the job done if ``lease`` still holds it
-    (:func:`league.queue.claim_done`); if it does not, nothing is written and the answer
+    (:func:`league.jobs.queue.claim_done`); if it does not, nothing is written and the answer
     is None. ``entry_ids`` maps the race's car names to the entries that drove them.
     """
     if not claim_done(session, lease):
@@ -247,7 +249,7 @@ def spawn(index: int) -> subprocess.Popen:
     """Start one worker process with one BLAS/OpenMP thread (settings from the environment)."""
     env = one_thread_env()
     name = f"{socket.gethostname()}-{os.getpid()}-{index}"
-    return subprocess.Popen([sys.executable, "-m", "league.worker", "--name", name], env=env)
+    return subprocess.Popen([sys.executable, "-m", "league.jobs.worker", "--name", name], env=env)
 
 
 def supervise(concurrency: int) -> None:
@@ -274,7 +276,7 @@ def supervise(concurrency: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m league.worker [--name NAME]``: one worker process (settings from env)."""
+    """``python -m league.jobs.worker [--name NAME]``: one worker process (settings from env)."""
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("--name", default=None)
     args = parser.parse_args(argv)

@@ -1,10 +1,14 @@
-"""Pure pursuit on the racing line: the strong non-learning baseline driver.
+"""Pure pursuit on the racing line: the scripted drivers that race without learning.
 
 The car steers, from its rear axle, towards the point ``lookahead`` metres ahead along
 the track's minimum-curvature racing line, and asks for the speed profile's speed there
 (the lowest on the way, so it never speeds up before a bend is over), capped by the
 action space and by the grip on the arc it is steering. It reads DeepRacer's params (not
 the sensors), so it races with any sensors.
+
+:class:`PurePursuitPolicy` is the baseline driver and the league's bot (the car that fills
+a head-to-model grid); :class:`PassingPursuitPolicy` also steers around boxes and cars,
+and is the teacher that imitation learning copies.
 """
 
 from __future__ import annotations
@@ -39,9 +43,8 @@ DEFAULT_LIMITS = car_limits()
 # (v^2 * tan(steer) / wheelbase). The pursuit car rounds the line's bends on a gentler arc
 # than the line's own, so a profile planned at the car's grip brakes it more than the arc
 # needs; the arc cap is what keeps it on the road, on the line or off it (passing,
-# rejoining). Measured on beginner_loop, 20 seeded 3-lap races with the races' actuation
-# noise: planned at 1x with no arc cap, a median best lap of 5.73 s and one off-track;
-# with these, 5.40 s and none.
+# rejoining). The two together lap faster and cleaner than the profile at the car's grip
+# with no arc cap (benchmarks/RESULTS.md, "The arc cap and wider box clearance").
 PROFILE_GRIP = 1.4
 ARC_GRIP = 1.0
 
@@ -173,8 +176,8 @@ PASS_BESIDE_M = 0.45
 # Centre-to-centre lateral distance kept from an object: half its width (a box 0.25 m, a
 # car 0.1 m; the params do not say which, so an object moving faster than MOVING_MPS is
 # taken for a car), half the car's (0.1 m) and a margin; and the margin kept from the
-# track's edge. (With the arc cap, boxes at 0.45 m: 7 box hits in 10 noisy 3-lap speedway
-# races; at 0.5 m: 1.)
+# track's edge. (0.5 m rather than 0.45 m from a box hits fewer boxes in noisy races: the
+# same section of benchmarks/RESULTS.md.)
 BOX_CLEARANCE_M = 0.5
 CAR_CLEARANCE_M = 0.32
 MOVING_MPS = 0.1
@@ -194,11 +197,10 @@ FOLLOW_MIN_SPEED = 0.5  # DeepRacer's lowest speed
 # FOLLOW_GAIN m/s per metre of gap error, and never faster than lets it brake at the car's
 # braking limit, after FOLLOW_REACTION_S, to the leader's speed before the gap falls to
 # FOLLOW_MIN_GAP_M (the car's length and a few centimetres; Gipps' car-following rule).
-# (Head-to-head laps are timed from each car's own grid slot, so a car that ends the race
-# closer behind than it started wins.) Measured in 40 seeded noisy 3-lap races on
-# beginner_loop against each of three camera time-trial models (docs/training.md,
-# "Learning by imitation"): passing them as any other car won 60-70%; following, 65-80%;
-# without the braking cap, 7 rear-end collisions against the one that brakes hard.
+# Head-to-head laps are timed from each car's own grid slot, so a car that ends the race
+# closer behind than it started wins: following a racing car wins more races than passing
+# it, and the braking cap keeps the follower off a leader that brakes hard
+# (benchmarks/RESULTS.md, "Following instead of passing").
 FOLLOW_ABOVE_MPS = 1.2
 FOLLOW_GAP_M = 0.55
 FOLLOW_GAIN = 3.0
@@ -218,7 +220,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
     followed on this side at its speed until there is room. Off the line by more than
     :data:`REJOIN_M`, it rejoins the line at most at :data:`PASS_SPEED`. On the line with
     no object near it drives as :class:`PurePursuitPolicy`. It is the teacher that
-    ``--teacher pursuit`` imitates (``agents.imitation``).
+    ``slipstream train --teacher pursuit`` imitates.
     """
 
     def __init__(self, track: Track, *args: Any, **kwargs: Any) -> None:

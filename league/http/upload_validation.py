@@ -1,10 +1,11 @@
 """Validate uploads outside the API process: one child per upload, under limits, a few at once.
 
-The API awaits a fresh ``python -m league.validation`` child (never a fork of the threaded
-server). The child puts itself under :func:`league.sandbox.limit_self` (address space: a
-race's memory allowance, ``race_memory_mb``; CPU: ``validation_cpu_seconds``), reads the
-archive from stdin, runs :func:`submissions.validate` and writes its report as JSON to
-stdout; the parent kills it at ``validation_wall_seconds``. Every way the child can fail
+The upload route awaits a fresh ``python -m league.http.upload_validation`` child (never a
+fork of the threaded server). The child puts itself under
+:func:`league.jobs.sandbox.limit_self` (address space: a race's memory allowance,
+``race_memory_mb``; CPU: ``validation_cpu_seconds``), reads the archive from stdin, runs
+:func:`submissions.validate` and writes its report as JSON to stdout; the parent kills it
+at ``validation_wall_seconds``. Every way the child can fail
 becomes a :class:`~submissions.Problem`, so the API process never parses the graph nor
 builds an onnxruntime session, and its memory stays flat. :class:`UploadValidator` lets
 ``validation_concurrency`` children run at once and ``validation_queue`` uploads wait (at
@@ -23,7 +24,7 @@ from contextlib import asynccontextmanager
 
 from pydantic import ValidationError
 
-from league.sandbox import SandboxLimits, limit_self, one_thread_env
+from league.jobs.sandbox import SandboxLimits, limit_self, one_thread_env
 from league.settings import Settings
 from submissions import Limits, Problem, ValidationReport, validate
 from submissions.format import MEMORY_WORDS
@@ -86,7 +87,7 @@ class UploadValidator:
             "max_archive_bytes": self.max_archive_bytes,
         }
         child = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "league.validation", json.dumps(arguments),
+            sys.executable, "-m", "league.http.upload_validation", json.dumps(arguments),
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
             env=one_thread_env(),
         )  # fmt: skip

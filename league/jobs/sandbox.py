@@ -11,7 +11,8 @@ starts with the arena already imported (it is forked from a single-threaded work
 worker dies; the parent enforces the wall-clock limit with SIGKILL. Answers come back as
 JSON over a pipe (never pickle), capped in size. Any way the child can fail becomes a
 :class:`SandboxError` whose message says which limit was hit. :func:`limit_self` is the
-limits part alone, also used by the upload validation child (:mod:`league.validation`).
+limits part alone, also used by the upload validation child
+(:mod:`league.http.upload_validation`).
 """
 
 from __future__ import annotations

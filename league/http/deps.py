@@ -9,7 +9,7 @@ from fastapi import Depends, Request
 from sqlalchemy.orm import Session
 
 from league.settings import Settings
-from league.storage import FileStore
+from league.store.base import FileStore
 
 
 def get_session(request: Request) -> Iterator[Session]:

@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session
 from arena.config import CarConfig, RaceConfig, resolve_track
 from arena.policy import Policy
 from league.models import Entry, Event, Job, Model
-from league.storage import DigestMismatch, Storage
+from league.store.base import DigestMismatch, FileStore
 
 BOTS = ("pursuit",)
 
@@ -62,7 +62,7 @@ def lineup(job: Job) -> list[dict[str, Any]]:
     return list(job.lineup or [])
 
 
-def checked_model_bytes(storage: Storage, model: Model) -> bytes:
+def checked_model_bytes(storage: FileStore, model: Model) -> bytes:
     """A model's stored archive, refused if it no longer matches the sha256 it was stored as.
 
     The bytes checked are the bytes raced: the plan carries them into the sandbox.
@@ -75,7 +75,7 @@ def checked_model_bytes(storage: Storage, model: Model) -> bytes:
         ) from None
 
 
-def build_plan(session: Session, storage: Storage, job: Job) -> RacePlan:
+def build_plan(session: Session, storage: FileStore, job: Job) -> RacePlan:
     """The race for ``job``: event ruleset + cars (models' declared sensors) + job seed."""
     event = session.get_one(Event, job.event_id)
     cars, plans = [], []
@@ -123,7 +123,7 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
     Model files were fully validated when stored and the plan's bytes were checked against
     that sha256 (:func:`checked_model_bytes`), so only the static checks run again here.
     """
-    from agents.pursuit import PurePursuitPolicy
+    from arena.pursuit import PurePursuitPolicy
     from submissions import load_policy
 
     drivers: dict[str, Policy] = {}

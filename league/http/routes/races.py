@@ -9,8 +9,7 @@ from pydantic import TypeAdapter
 from sqlalchemy import select
 from sqlalchemy.orm import Session, selectinload
 
-from league.models import Entry, Race, Racer
-from league.read_cache import (
+from league.http.read_cache import (
     Prepared,
     answer,
     answer_gzipped,
@@ -20,8 +19,9 @@ from league.read_cache import (
     prepared,
     race_version,
 )
+from league.models import Entry, Race, Racer
 from league.schemas import MAX_ID, ErrorOut, RaceBrief, RaceCarOut, RaceOut
-from league.storage import FileStore
+from league.store.base import FileStore
 
 router = APIRouter(prefix="/api/races", tags=["races"])
 RaceId = Annotated[int, Path(ge=1, le=MAX_ID)]
