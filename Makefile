@@ -26,5 +26,19 @@ lint: install
 test: install lint
 	$(BIN)/python -m pytest
 
+# The quick benchmarks, each under about 30 s on a 2-core machine; each prints its table and
+# appends it to benchmarks/results/ (`make bench BENCH_ARGS=--no-record` only prints).
+# Left out: hostile_uploads (over a minute, 40 x 16 MB uploads at once), api_load (needs
+# wrk; about 2 minutes), league_throughput without --quick (minutes), and the training
+# ones, race_quality, time_to_lap and train_profile (minutes to hours each).
+bench: install
+	$(BIN)/python benchmarks/camera_frame.py $(BENCH_ARGS)
+	$(BIN)/python benchmarks/env_throughput.py $(BENCH_ARGS)
+	$(BIN)/python benchmarks/submission_io.py $(BENCH_ARGS)
+	$(BIN)/python benchmarks/sandbox.py $(BENCH_ARGS)
+	$(BIN)/python benchmarks/body_flood.py $(BENCH_ARGS)
+	$(BIN)/python benchmarks/pursuit_races.py $(BENCH_ARGS)
+	$(BIN)/python benchmarks/league_throughput.py --quick $(BENCH_ARGS)
+
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis *.egg-info

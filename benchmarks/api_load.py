@@ -3,7 +3,7 @@
 Needs Debian's wrk (``apt-get install wrk``). Prepares a league like the demo's (its four
 events, the first filled with ``--racers`` racers and their races), starts
 ``slipstream league serve`` (``python -m league serve``, rate limit off, access log off)
-pinned to one core and runs wrk pinned to another, then prints one table per route:
+pinned to one core and runs wrk pinned to another, then prints one table, a row per route:
 throughput and p50 / p99 latency at 16 and 64 connections, and p50 / p99 at a fixed
 ``--rate`` (default 500 req/s).
 
@@ -29,11 +29,11 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
+from harness import ROOT, LeagueServer, ResultTable, add_record_option, start_league, write
 
 from arena.config import RaceConfig
 from arena.race import CarResult, RaceResult
@@ -42,9 +42,8 @@ from league.db import make_engine, make_session_factory, scratch_schema
 from league.demo import demo_events
 from league.migrations import upgrade
 from league.models import Entry, Model
-from league.storage import Storage
+from league.store.local import LocalFileStore
 
-ROOT = Path(__file__).resolve().parents[1]
 PACER = """
 local ffi = require("ffi")
 ffi.cdef[[ typedef struct { long tv_sec; long tv_nsec; } bench_ts;
@@ -64,7 +63,7 @@ def seed(url: str, data_dir: Path, racers: int, races_each: int) -> tuple[int, i
     """The demo's events; the first one raced by ``racers`` racers; its id and a race id."""
     engine = make_engine(url)
     upgrade(engine)
-    storage = Storage(data_dir / "files")
+    storage = LocalFileStore(data_dir / "files")
     steps = 450
     with make_session_factory(engine)() as session:
         admin, _ = crud.create_racer(session, "admin", admin=True)
@@ -101,35 +100,19 @@ def cores() -> tuple[int, int]:
     return available[0], available[1 % len(available)]
 
 
-def start_server(
-    url: str, data_dir: Path, port: int, core: int, tree: Path = ROOT
-) -> subprocess.Popen:
-    """``slipstream league serve`` of ``tree`` on ``core`` (rate limit off); wait until it
-    answers. Another ``tree`` (an older checkout) measures that code against the same data."""
+def start_server(url: str, data_dir: Path, port: int, core: int, tree: Path = ROOT) -> LeagueServer:
+    """``slipstream league serve`` of ``tree`` on ``core`` (rate limit off), ready.
+    Another ``tree`` (an older checkout) measures that code against the same data."""
     env = {
         **os.environ,
         "SLIPSTREAM_DATABASE_URL": url,
         "SLIPSTREAM_RATE_LIMIT_PER_SECOND": "0",
         "PYTHONPATH": str(tree),
     }
-    args = ["serve", "--port", str(port), "--data-dir", str(data_dir)]
+    args = ["--data-dir", str(data_dir)]
     if tree == ROOT:
         args.append("--no-access-log")  # older trees log every request (as they did)
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "league", *args],
-        env=env,
-        cwd=tree,
-        preexec_fn=lambda: os.sched_setaffinity(0, {core}),
-    )
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/readyz").status_code == 200:
-                return proc
-        except httpx.TransportError:
-            time.sleep(0.2)
-    proc.kill()
-    raise RuntimeError("the league server did not start")
+    return start_league(*args, port=port, env=env, cwd=tree, core=core)
 
 
 @dataclass
@@ -140,6 +123,10 @@ class Run:
     p50_ms: float
     p99_ms: float
     errors: int
+
+    def cells(self) -> list[str]:
+        """Rate, p50 and p99 as table cells."""
+        return [f"{self.rate:.0f}", f"{self.p50_ms:.1f}", f"{self.p99_ms:.1f}"]
 
 
 UNITS = {"us": 1e-3, "ms": 1.0, "s": 1000.0}
@@ -176,48 +163,42 @@ def wrk(url: str, connections: int, seconds: float, core: int, **options: object
     return Run(rate, _ms(latency["50"]), _ms(latency["99"]), errors)
 
 
-def measure(url: str, args: argparse.Namespace, label: str) -> list[str]:
+def measure(url: str, args: argparse.Namespace, label: str) -> list[list[str]]:
     """Prepare, serve and measure one database; the table rows."""
     server_core, wrk_core = cores()
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         data_dir = Path(folder)
         event, race = seed(url, data_dir, args.racers, args.races)
-        proc = start_server(url, data_dir, args.port, server_core, args.server_path.resolve())
-        base = f"http://127.0.0.1:{args.port}"
-        etag = httpx.get(f"{base}/api/events/{event}/leaderboard").headers.get("etag", "")
-        pacer = data_dir / "pacer.lua"
-        pacer.write_text(PACER % {"rate": args.rate})
-        routes = {
-            "home page /": ("/", []),
-            "event page": (f"/events/{event}", []),
-            "leaderboard": (f"/api/events/{event}/leaderboard", []),
-            "leaderboard 304": (f"/api/events/{event}/leaderboard", [f"If-None-Match: {etag}"]),
-            "races list": (f"/api/races?event={event}&limit=20", []),
-            "race detail": (f"/api/races/{race}", []),
-            "trace (gzip)": (f"/api/races/{race}/trace", ["Accept-Encoding: gzip"]),
-        }
-        try:
+        tree = args.server_path.resolve()
+        with start_server(url, data_dir, args.port, server_core, tree) as server:
+            base = server.url
+            etag = httpx.get(f"{base}/api/events/{event}/leaderboard").headers.get("etag", "")
+            pacer = data_dir / "pacer.lua"
+            pacer.write_text(PACER % {"rate": args.rate})
+            routes = {
+                "home page /": ("/", []),
+                "event page": (f"/events/{event}", []),
+                "leaderboard": (f"/api/events/{event}/leaderboard", []),
+                "leaderboard 304": (f"/api/events/{event}/leaderboard", [f"If-None-Match: {etag}"]),
+                "races list": (f"/api/races?event={event}&limit=20", []),
+                "race detail": (f"/api/races/{race}", []),
+                "trace (gzip)": (f"/api/races/{race}/trace", ["Accept-Encoding: gzip"]),
+            }
             for name, (path, headers) in routes.items():
                 wrk(base + path, 4, 1, wrk_core, headers=headers)  # warm up
                 runs = [wrk(base + path, c, args.seconds, wrk_core, headers=headers)
                         for c in (16, 64)]  # fmt: skip
                 paced = wrk(base + path, 32, args.seconds, wrk_core, headers=headers, script=pacer)
-                cells = [f"{r.rate:.0f} | {r.p50_ms:.1f} | {r.p99_ms:.1f}" for r in runs]
+                cells = [cell for r in (*runs, paced) for cell in r.cells()]
                 errors = sum(r.errors for r in (*runs, paced))
-                rows.append(
-                    f"| {label} | {name} | {' | '.join(cells)} | {paced.rate:.0f} | "
-                    f"{paced.p50_ms:.1f} | {paced.p99_ms:.1f} | {errors} |"
-                )
-                print(rows[-1], flush=True)
-        finally:
-            proc.terminate()
-            proc.wait(timeout=30)
+                rows.append([label, name, *cells, str(errors)])
+                print(" | ".join(rows[-1]), flush=True)
     return rows
 
 
 def main() -> None:
-    """Parse options, check for wrk, measure, print the table."""
+    """Parse options, check for wrk, measure, write the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--db", choices=["sqlite", "postgres"], default="sqlite")
     parser.add_argument(
@@ -236,17 +217,18 @@ def main() -> None:
         default=ROOT,
         help="serve another checkout (e.g. a git worktree of an older commit) on the same data",
     )
+    add_record_option(parser)
     args = parser.parse_args()
     if shutil.which("wrk") is None or shutil.which("taskset") is None:
         sys.exit("benchmarks/api_load.py needs wrk and taskset: apt-get install wrk util-linux")
     server_core, wrk_core = cores()
-    print(f"server on core {server_core}, wrk on core {wrk_core}", flush=True)
-    header = [
-        f"| db | route | c16 req/s | p50 ms | p99 ms | c64 req/s | p50 ms | p99 ms "
-        f"| @{args.rate:.0f}/s got | p50 ms | p99 ms | errors |",
-        "|---|---|" + "---:|" * 10,
-    ]
-    print("\n".join(header), flush=True)
+    cores_note = f"server on core {server_core}, wrk on core {wrk_core}"
+    print(cores_note, flush=True)
+    paced = f"@{args.rate:.0f}/s"
+    columns = ["db", "route", "c16 req/s", "c16 p50 ms", "c16 p99 ms", "c64 req/s", "c64 p50 ms",
+               "c64 p99 ms", f"{paced} got", f"{paced} p50 ms", f"{paced} p99 ms",
+               "errors"]  # fmt: skip
+    print(" | ".join(columns), flush=True)
     if args.db == "sqlite":
         with tempfile.TemporaryDirectory() as folder:
             rows = measure(f"sqlite:///{folder}/league.db", args, "sqlite")
@@ -258,7 +240,13 @@ def main() -> None:
             rows = measure(url, args, "postgres")
         finally:
             drop()
-    print("\n" + "\n".join(header + rows))
+    table = ResultTable(
+        f"League reads under wrk load, {args.seconds} s per run", columns, "ll" + "r" * 10
+    )
+    for row in rows:
+        table.add_row(*row)
+    table.notes.append(cores_note)
+    write(table, args.record)
 
 
 if __name__ == "__main__":

@@ -21,16 +21,11 @@ import sys
 import tempfile
 import threading
 import time
-from pathlib import Path
+
+from harness import ResultTable, add_record_option, rss_kib, start_league, write
 
 PATH = "/api/events/1/entries"
 CHUNK = 1024 * 1024
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def post(port: int, body: bytes) -> tuple[int, float]:
@@ -68,13 +63,6 @@ def load(port: int, clients: int, megabytes: int) -> None:
     print(json.dumps(results))
 
 
-def rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return 0.0
-
-
 def healthz_seconds(port: int) -> float:
     start = time.monotonic()
     with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
@@ -83,47 +71,30 @@ def healthz_seconds(port: int) -> float:
     return time.monotonic() - start
 
 
-def wait_until_up(port: int, server: subprocess.Popen) -> None:
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if server.poll() is not None:
-            raise SystemExit("the server exited before answering")
-        try:
-            healthz_seconds(port)
-            return
-        except OSError:
-            time.sleep(0.1)
-    raise SystemExit("the server did not answer /healthz within 60 s")
-
-
-def measure(clients: int, megabytes: int) -> None:
-    port = free_port()
-    data_dir = tempfile.mkdtemp(prefix="body-flood-")
-    serve = [sys.executable, "-m", "league", "serve", "--port", str(port), "--data-dir", data_dir]
-    server = subprocess.Popen(serve, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    try:
-        wait_until_up(port, server)
+def measure(clients: int, megabytes: int, record: bool) -> None:
+    """Flood a fresh server; write the table."""
+    with (
+        tempfile.TemporaryDirectory(prefix="body-flood-") as data_dir,
+        start_league("--data-dir", data_dir) as server,
+    ):
+        port, pid = server.port, server.process.pid
         time.sleep(0.5)
-        idle = rss_mb(server.pid)
+        idle = rss_kib(pid) / 1024
         command = [sys.executable, __file__, "--load", str(port)]
         command += ["--clients", str(clients), "--mb", str(megabytes)]
         started = time.monotonic()
         loader = subprocess.Popen(command, stdout=subprocess.PIPE, text=True)
         peak, worst = idle, 0.0
         while loader.poll() is None:
-            peak = max(peak, rss_mb(server.pid))
+            peak = max(peak, rss_kib(pid) / 1024)
             worst = max(worst, healthz_seconds(port))
             time.sleep(0.05)
         elapsed = time.monotonic() - started
         results = json.loads(loader.stdout.read())
-    finally:
-        server.terminate()
-        server.wait(timeout=30)
     statuses = sorted({status for status, _ in results})
     slowest = max(seconds for _, seconds in results)
-    print(f"{clients} anonymous {megabytes} MB JSON posts at once to POST {PATH}")
-    print(f"| {'measure':<32} | {'value':>12} |")
-    print(f"|{'-' * 34}|{'-' * 14}|")
+    title = f"{clients} anonymous {megabytes} MB JSON posts at once to POST {PATH}"
+    table = ResultTable(title, ("measure", "value"))
     rows = [
         ("answers", ",".join(map(str, statuses))),
         ("slowest answer (s)", f"{slowest:.2f}"),
@@ -134,7 +105,8 @@ def measure(clients: int, megabytes: int) -> None:
         ("worst /healthz meanwhile (s)", f"{worst:.3f}"),
     ]
     for name, value in rows:
-        print(f"| {name:<32} | {value:>12} |")
+        table.add_row(name, value)
+    write(table, record)
 
 
 def main() -> None:
@@ -142,11 +114,12 @@ def main() -> None:
     parser.add_argument("--clients", type=int, default=8)
     parser.add_argument("--mb", type=int, default=50)
     parser.add_argument("--load", type=int, help=argparse.SUPPRESS)  # the load process's port
+    add_record_option(parser)
     args = parser.parse_args()
     if args.load:
         load(args.load, args.clients, args.mb)
     else:
-        measure(args.clients, args.mb)
+        measure(args.clients, args.mb, args.record)
 
 
 if __name__ == "__main__":

@@ -10,13 +10,10 @@ Run: ``.venv/bin/python benchmarks/camera_frame.py [--frames N] [--track NAME]``
 from __future__ import annotations
 
 import argparse
-import os
-import time
-from collections.abc import Callable
+from functools import partial
 
 import numpy as np
-from rich.console import Console
-from rich.table import Table
+from harness import ResultTable, add_record_option, summary, time_calls, write
 
 from arena.camera import Box3D, CameraRenderer
 from tracks.catalog import get_track
@@ -43,31 +40,18 @@ def scene_boxes(track: Track, s: float, count: int) -> list[Box3D]:
     return boxes
 
 
-def frame_times(render: Callable[[], np.ndarray], frames: int) -> list[float]:
-    """Seconds per call of ``render``, after :data:`WARMUP` untimed calls."""
-    for _ in range(WARMUP):
-        render()
-    times = []
-    for _ in range(frames):
-        start = time.perf_counter()
-        render()
-        times.append(time.perf_counter() - start)
-    return times
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=200, help="timed frames per case")
     parser.add_argument("--track", default="beginner_loop", help="built-in track")
+    add_record_option(parser)
     args = parser.parse_args()
     track = get_track(args.track)
     renderer = CameraRenderer(track)
     s = 1.0
     (x, y), yaw = track.pose_at(s)
     pose = (float(x), float(y), float(yaw))
-    table = Table(title="Camera frame time")
-    for col in ("case", "median ms", "p99 ms", "frames/s"):
-        table.add_column(col, justify="left" if col == "case" else "right")
+    table = ResultTable("Camera frame time", ("case", "median ms", "p99 ms", "frames/s"))
     for name, stereo, count in (
         ("mono, no boxes", False, 0),
         ("mono, 2 boxes", False, 2),
@@ -76,20 +60,12 @@ def main() -> None:
     ):
         boxes = scene_boxes(track, s, count)
         draw = renderer.render_stereo if stereo else renderer.render
-        times = frame_times(lambda draw=draw, boxes=boxes: draw(*pose, boxes), args.frames)
-        median = float(np.median(times))
+        times = summary(time_calls(partial(draw, *pose, boxes), args.frames, warmup=WARMUP))
         table.add_row(
-            name,
-            f"{1e3 * median:.3f}",
-            f"{1e3 * float(np.percentile(times, 99)):.3f}",
-            f"{1 / median:.0f}",
+            name, f"{1e3 * times.median:.3f}", f"{1e3 * times.p99:.3f}", f"{1 / times.median:.0f}"
         )
-    console = Console(width=120)
-    console.print(table)
-    console.print(
-        f"{args.track}, {args.frames} timed frames per case; "
-        f"1-min load average {os.getloadavg()[0]:.1f}"
-    )
+    table.notes.append(f"{args.track}, {args.frames} timed frames per case")
+    write(table, args.record)
 
 
 if __name__ == "__main__":

@@ -10,14 +10,12 @@ or params); each config's ratio to it shows what the rest of the step costs.
 from __future__ import annotations
 
 import argparse
-import os
 import resource
 import time
 import tracemalloc
 
 import numpy as np
-from rich.console import Console
-from rich.table import Table
+from harness import ResultTable, add_record_option, summary, write
 
 import arena
 from arena import world
@@ -52,12 +50,12 @@ def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str
         if not env.agents:
             env.reset()
     env.close()
-    total = sum(latencies)
+    times = summary(latencies)
     return {
-        "agent_steps_per_s": agent_steps / total,
-        "p50_ms": 1e3 * float(np.median(latencies)),
-        "p99_ms": 1e3 * float(np.percentile(latencies, 99)),
-        "step_ms": 1e3 * total / steps,
+        "agent_steps_per_s": agent_steps / sum(latencies),
+        "p50_ms": 1e3 * times.median,
+        "p99_ms": 1e3 * times.p99,
+        "step_ms": 1e3 * times.mean,
         "mem_mb": peak / 2**20,
     }
 
@@ -66,11 +64,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=600, help="control steps per config")
     parser.add_argument("--repeats", type=int, default=3, help="runs per config (median shown)")
+    add_record_option(parser)
     args = parser.parse_args()
     settings = world.PhysicsSettings()
     title = f"RacingEnv throughput ({args.steps} steps, median of {args.repeats} runs, one process)"
-    table = Table(title=title)
-    for col in (
+    columns = (
         "config",
         "agent-steps/s/core",
         "step ms (mean)",
@@ -78,12 +76,12 @@ def main() -> None:
         "p99 ms",
         "x physics floor",
         "env alloc MB",
-    ):
-        table.add_column(col, justify="left" if col == "config" else "right")
+    )
+    table = ResultTable(title, columns)
     floors = {}
     for cars in (1, 4):
         costs = [world.physics_cost(cars, settings, steps=args.steps) for _ in range(args.repeats)]
-        floors[cars] = float(np.median(costs))
+        floors[cars] = summary(costs).median
         table.add_row(
             f"physics floor, {cars} car(s)",
             f"{cars / floors[cars]:.0f}",
@@ -109,11 +107,9 @@ def main() -> None:
             f"{m['step_ms'] / (1e3 * floors[cars]):.1f}",
             f"{m['mem_mb']:.1f}",
         )
-    console = Console(width=140)
-    console.print(table)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    load = os.getloadavg()[0]
-    console.print(f"process peak RSS {rss:.0f} MB; 1-min load average {load:.1f}; {settings}")
+    table.notes.append(f"process peak RSS {rss:.0f} MB; {settings}")
+    write(table, args.record)
 
 
 if __name__ == "__main__":

@@ -4,9 +4,9 @@ Starts `python -m league serve` (SQLite, rate limits off) in a subprocess on loo
 ``--server-path`` first on its ``PYTHONPATH`` (point it at an old checkout to measure
 "before"), and sends the files from this process. While each scenario runs it samples the
 RSS of the server process and of its children from ``/proc`` every 20 ms, and times
-``GET /healthz`` every 100 ms. Prints a Markdown table.
+``GET /healthz`` every 100 ms. Prints one table.
 
-Scenarios (files built in milliseconds by ``tests.submissions.hostile_models``):
+Scenarios (files built in milliseconds by this folder's ``hostile_models``):
 broadcast bomb (n, 1) + (1, n), one and two at once; ``--chain`` constant 2048 x 2048
 MatMuls; ``--flood`` different valid wide MLPs at once (each steps in about 0.6 ms); the
 same file twice at once, five times.
@@ -29,23 +29,9 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-import httpx  # noqa: E402
-
-from tests.submissions.hostile_models import broadcast_bomb, matmul_chain, wide_mlp  # noqa: E402
-
-
-def _rss_kib(pid: int) -> int:
-    try:
-        with open(f"/proc/{pid}/status") as handle:
-            for line in handle:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-    except OSError:
-        pass
-    return 0
+import httpx
+from harness import ROOT, LeagueServer, ResultTable, add_record_option, rss_kib, start_league, write
+from hostile_models import broadcast_bomb, matmul_chain, wide_mlp
 
 
 def _descendants(pid: int) -> list[int]:
@@ -76,8 +62,8 @@ class Probe:
 
     def _memory(self) -> None:
         while not self.stop.wait(0.02):
-            self.server_peak_kib = max(self.server_peak_kib, _rss_kib(self.pid))
-            kids = sum(_rss_kib(k) for k in _descendants(self.pid))
+            self.server_peak_kib = max(self.server_peak_kib, rss_kib(self.pid))
+            kids = sum(rss_kib(k) for k in _descendants(self.pid))
             self.children_peak_kib = max(self.children_peak_kib, kids)
 
     def _health(self) -> None:
@@ -115,9 +101,9 @@ def _upload(url: str, token: str, data: bytes, name: str) -> tuple[int, float, s
     return status, time.perf_counter() - start, body
 
 
-def _scenario(server: Server, name: str, files: list[bytes]) -> dict[str, object]:
+def _scenario(server: LeagueServer, token: str, name: str, files: list[bytes]) -> dict[str, object]:
     with Probe(server.process.pid, server.url) as probe, ThreadPoolExecutor(len(files)) as pool:
-        send = lambda i: _upload(server.url, server.token, files[i], f"f{i}")  # noqa: E731
+        send = lambda i: _upload(server.url, token, files[i], f"f{i}")  # noqa: E731
         answers = list(pool.map(send, range(len(files))))
     time.sleep(0.5)
     slow = sum("too slow" in body for _, _, body in answers)
@@ -128,22 +114,16 @@ def _scenario(server: Server, name: str, files: list[bytes]) -> dict[str, object
         "slowest answer s": max(seconds for _, seconds, _ in answers),
         "API peak MB": probe.server_peak_kib / 1024,
         "children peak MB": probe.children_peak_kib / 1024,
-        "API after MB": _rss_kib(server.process.pid) / 1024,
+        "API after MB": rss_kib(server.process.pid) / 1024,
         "healthz worst ms": probe.health_worst_s * 1000,
         "healthz failed": probe.health_failures,
     }
 
 
-@dataclass
-class Server:
-    """A league server subprocess and a racer's token."""
-
-    process: subprocess.Popen
-    url: str
-    token: str
-
-
-def _start(server_path: Path, data_dir: Path, port: int, memory_cap_mb: int) -> Server:
+def _start(
+    server_path: Path, data_dir: Path, port: int, memory_cap_mb: int
+) -> tuple[LeagueServer, str]:
+    """A racer made, then the server of ``server_path`` started: the server and the token."""
     env = {
         **os.environ,
         "PYTHONPATH": str(server_path),
@@ -157,37 +137,19 @@ def _start(server_path: Path, data_dir: Path, port: int, memory_cap_mb: int) -> 
     )  # fmt: skip
     token = made.stdout.strip().splitlines()[-1]
     cap = ["prlimit", f"--as={memory_cap_mb * 1024 * 1024}"] if memory_cap_mb else []
-    process = subprocess.Popen(
-        [*cap, *python, "serve", "--host", "127.0.0.1", "--port", str(port)],
-        env=env, cwd=server_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
-    url = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"{url}/healthz", timeout=1).status_code == 200:
-                return Server(process, url, token)
-        except httpx.HTTPError:
-            time.sleep(0.2)
-    process.kill()
-    raise RuntimeError("the server did not start")
+    server = start_league("--host", "127.0.0.1", port=port, env=env, cwd=server_path, prefix=cap)
+    return server, token
 
 
-def _table(rows: list[dict[str, object]]) -> str:
-    keys = list(rows[0])
-
-    def cell(value: object) -> str:
-        if isinstance(value, collections.Counter):
-            return " ".join(f"{n}x{code}" for code, n in sorted(value.items()))
-        return f"{value:.1f}" if isinstance(value, float) else str(value)
-
-    lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(cell(row[k]) for k in keys) + " |" for row in rows]
-    return "\n".join(lines)
+def _cell(value: object) -> str:
+    """A table cell: answer counts as ``NxCODE``, floats to one decimal."""
+    if isinstance(value, collections.Counter):
+        return " ".join(f"{n}x{code}" for code, n in sorted(value.items()))
+    return f"{value:.1f}" if isinstance(value, float) else str(value)
 
 
 def main() -> None:
-    """Run the scenarios against one server and print the table."""
+    """Run the scenarios against one server and write the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--server-path", type=Path, default=ROOT)
     parser.add_argument("--port", type=int, default=8765)
@@ -195,6 +157,7 @@ def main() -> None:
     parser.add_argument("--chain", type=int, default=30, help="chained 2048^2 MatMuls")
     parser.add_argument("--flood", type=int, default=40, help="valid uploads at once")
     parser.add_argument("--memory-cap-mb", type=int, default=0, help="prlimit --as on the server")
+    add_record_option(parser)
     args = parser.parse_args()
     valid = [wide_mlp(2048, seed=i) for i in range(args.flood)]
     pairs = [wide_mlp(256, seed=10_000 + i) for i in range(5)]
@@ -206,17 +169,19 @@ def main() -> None:
     ]
     with tempfile.TemporaryDirectory() as tmp:
         path, data_dir = args.server_path.resolve(), Path(tmp) / "data"
-        server = _start(path, data_dir, args.port, args.memory_cap_mb)
-        try:
-            rows = [_scenario(server, name, files) for name, files in scenarios]
-            twins = [_scenario(server, "same file twice at once, 5 pairs", [f, f]) for f in pairs]
+        server, token = _start(path, data_dir, args.port, args.memory_cap_mb)
+        with server:
+            rows = [_scenario(server, token, name, files) for name, files in scenarios]
+            twins = [
+                _scenario(server, token, "same file twice at once, 5 pairs", [f, f]) for f in pairs
+            ]
             answers = sum((row["answers"] for row in twins), collections.Counter())
             rows.append({**twins[-1], "answers": answers})
-        finally:
-            server.process.kill()
-            server.process.wait()
-    print(f"server code: {args.server_path.resolve()}")
-    print(_table(rows))
+    table = ResultTable("Hostile uploads against one league server", list(rows[0]))
+    for row in rows:
+        table.add_row(*(_cell(value) for value in row.values()))
+    table.notes.append(f"server code: {args.server_path.resolve()}")
+    write(table, args.record)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@
 A fresh SQLite league (or ``--database-url``) gets a 3-lap time trial on ``beginner_loop``;
 lidar and camera models (hand-built ONNX graphs with random weights) are entered, each
 entry queuing one job (models are uploaded and validated beforehand, entries made in a
-burst), while real ``python -m league.worker`` processes (already started and idle) drain
+burst), while real ``python -m league.jobs.worker`` processes (already started and idle) drain
 the queue. Random-weight models never finish, so the event's time limit is
 60 s of simulated time: 900 control steps, the length of 3 laps at the pure-pursuit bot's
 pace (about 20 s a lap). Reported per case: evaluations per hour (entry of the first job
@@ -26,7 +26,6 @@ import contextlib
 import json
 import os
 import resource
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -37,9 +36,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from harness import ROOT, ResultTable, add_record_option, summary, write
 from onnx import TensorProto, helper, numpy_helper
-from rich.console import Console
-from rich.table import Table
 from sqlalchemy import func, select
 
 from arena.actions import default_discrete_space
@@ -49,18 +47,17 @@ from arena.env import RacingEnv
 from arena.race import RaceResult, run_race
 from league import crud
 from league.db import make_engine, make_session_factory
-from league.evaluation import build_plan, decode_plan, encode_plan, policies
+from league.jobs.evaluation import build_plan, decode_plan, encode_plan, policies
+from league.jobs.queue import lease_job
+from league.jobs.sandbox import SandboxLimits, WarmSandbox, run_limited
+from league.jobs.worker import race_answer, record_result
 from league.migrations import upgrade
 from league.models import Entry, Event, Job, Model, Race, Racer, utcnow
-from league.queue import lease_job
-from league.sandbox import SandboxLimits, WarmSandbox, run_limited
 from league.schemas import EventCreate
 from league.settings import Settings
-from league.storage import Storage
-from league.worker import race_answer, record_result
+from league.store.local import LocalFileStore
 from submissions import load_policy, pack, validate
 
-ROOT = Path(__file__).resolve().parents[1]
 RACES = 5
 """Races per measured race phase in ``--profile`` (the least CPU time counts)."""
 LIMITS = SandboxLimits()
@@ -130,7 +127,7 @@ class Bench:
         self.engine = make_engine(self.settings.db_url)
         upgrade(self.engine)
         self.sessions = make_session_factory(self.engine)
-        self.storage = Storage(self.settings.storage_dir)
+        self.storage = LocalFileStore(self.settings.storage_dir)
         self.folder = folder
         opens = utcnow() - timedelta(minutes=1)
         spec = EventCreate(name="Bench", laps=3, time_limit_s=60.0, seeds=[0], opens_at=opens)
@@ -189,7 +186,7 @@ class Bench:
         env |= {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
         procs = [
             subprocess.Popen(
-                [sys.executable, "-m", "league.worker", "--name", f"bench{i}"],
+                [sys.executable, "-m", "league.jobs.worker", "--name", f"bench{i}"],
                 cwd=tree,
                 env=env,
                 stderr=subprocess.DEVNULL,
@@ -251,7 +248,7 @@ def run_case(
         "seconds_per_eval": elapsed / jobs,
         "cpu_per_eval": cpu / jobs,
         "idle_latency": idle,
-        "median_latency": statistics.median(loaded),
+        "median_latency": summary(loaded).median,
     }
 
 
@@ -328,7 +325,7 @@ def profile(bench: Bench, sensor: str) -> list[tuple[str, float, str]]:
         ("build the plan (database, model sha256)", plan_ms, "worker"),
         (
             "plan to the warm child and back (pipe)",
-            statistics.mean(_warm_ms(lambda r: None, request, 50)),
+            summary(_warm_ms(lambda r: None, request, 50)).mean,
             "both",
         ),
         ("load the model: static checks + session", stored_ms, "child"),
@@ -349,7 +346,7 @@ def profile(bench: Bench, sensor: str) -> list[tuple[str, float, str]]:
 
 
 def main() -> None:
-    """Run every case and print the table."""
+    """Run every case and write the table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lidar-jobs", type=int, default=16)
     parser.add_argument("--camera-jobs", type=int, default=8)
@@ -362,20 +359,22 @@ def main() -> None:
         default=ROOT,
         help="run the workers of another checkout (e.g. a git worktree of an older commit)",
     )
+    add_record_option(parser)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         bench = Bench(Path(tmp), args.database_url)
-        table = print_profile(bench) if args.profile else throughput(bench, args)
+        table = phase_profile(bench) if args.profile else throughput(bench, args)
         bench.engine.dispose()
-    Console(width=120).print(table)
-    print(f"1-min load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    write(table, args.record)
 
 
-def print_profile(bench: Bench) -> Table:
+def phase_profile(bench: Bench) -> ResultTable:
     """The per-phase table of one lidar and one camera evaluation."""
-    table = Table(title="One evaluation, CPU ms per phase (900 steps, beginner_loop)")
-    for column in ("phase", "lidar ms", "camera ms", "where"):
-        table.add_column(column, justify="left" if column in ("phase", "where") else "right")
+    table = ResultTable(
+        "One evaluation, CPU ms per phase (900 steps, beginner_loop)",
+        ("phase", "lidar ms", "camera ms", "where"),
+        "lrrl",
+    )
     lidar, camera = profile(bench, "lidar"), profile(bench, "camera")
     for (phase, ms, where), (_, cam_ms, _) in zip(lidar, camera, strict=True):
         table.add_row(phase, f"{ms:.1f}", f"{cam_ms:.1f}", where)
@@ -386,12 +385,14 @@ def print_profile(bench: Bench) -> Table:
     return table
 
 
-def throughput(bench: Bench, args: argparse.Namespace) -> Table:
+def throughput(bench: Bench, args: argparse.Namespace) -> ResultTable:
     """Run every case; the table."""
-    table = Table(title="Time-trial evaluations (3 laps' worth: 900 steps), beginner_loop")
     columns = ("model", "workers", "evals / hour", "s / eval", "CPU s / eval", "idle latency s")
-    for column in (*columns, "p50 s"):
-        table.add_column(column, justify="right")
+    table = ResultTable(
+        "Time-trial evaluations (3 laps' worth: 900 steps), beginner_loop",
+        (*columns, "p50 s"),
+        "r" * (len(columns) + 1),
+    )
     jobs = {"lidar": args.lidar_jobs, "camera": args.camera_jobs}
     if args.quick:
         jobs = {"lidar": 8, "camera": 4}

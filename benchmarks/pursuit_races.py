@@ -1,6 +1,6 @@
 """The passing pursuit driver (the imitation teacher) in seeded races: how fast, how clean.
 
-Races :class:`agents.pursuit.PassingPursuitPolicy` with the races' actuation noise and
+Races :class:`arena.pursuit.PassingPursuitPolicy` with the races' actuation noise and
 start jitter (``arena.config.SeedVariation``; training has neither), ``--seeds`` seeded
 3-lap races per case, and prints one table: time trial on ``beginner_loop``, object
 avoidance on ``slipstream_speedway`` (6 random boxes), head to bot on ``beginner_loop``
@@ -26,14 +26,13 @@ import argparse
 import statistics
 from pathlib import Path
 
+from harness import ResultTable, add_record_option, write
 from race_quality import StartSplit  # this folder's: the scripts run from it
-from rich.console import Console
-from rich.table import Table
 
 import arena
 from agents.action_spaces import parse_action_space_spec
-from agents.pursuit import PassingPursuitPolicy, racing_line_for
 from agents.selfplay import opponent_policy, read_policy_graph
+from arena.pursuit import PassingPursuitPolicy, racing_line_for
 from arena.race import RaceResult, run_race
 from tracks.catalog import TrackNotFoundError, get_track
 
@@ -113,12 +112,12 @@ def main() -> None:
     parser.add_argument(
         "--rival-track", default="beginner_loop", help="the head-to-model track (the rival's)"
     )
+    add_record_option(parser)
     args = parser.parse_args()
     try:
         get_track(args.rival_track)
     except TrackNotFoundError as error:
         parser.error(str(error))
-    table = Table(title=f"passing pursuit driver, {LAPS}-lap seeded races ({SPACE})")
     columns = (
         "race type",
         "track",
@@ -132,14 +131,14 @@ def main() -> None:
         "margin from behind (s)",
         "rival's off-tracks + collisions",
     )
-    for column in columns:
-        table.add_column(column)
+    title = f"passing pursuit driver, {LAPS}-lap seeded races ({SPACE})"
+    table = ResultTable(title, columns, "ll" + "r" * (len(columns) - 2))
     for race_type, track in CASES:
         table.add_row(*row(race_type, track, args.seeds))
     if args.rival is not None:
         rival = read_policy_graph(args.rival)
         table.add_row(*row("head_to_model", args.rival_track, args.seeds, rival))
-    Console(width=200).print(table)
+    write(table, args.record)
 
 
 if __name__ == "__main__":

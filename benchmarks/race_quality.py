@@ -1,11 +1,11 @@
 """Race quality per race type: train each for a fixed budget, then measure how it drives.
 
 For every race type (``time_trial``, ``object_avoidance``, ``head_to_bot``,
-``head_to_model``) it trains the recipe below (:data:`RECIPES`) for ``--minutes`` on a
+``head_to_model``) it trains its recipe (``agents/recipes.py``) for ``--minutes`` on a
 built-in track and prints one table: sensors, training minutes, samples/s, minutes to
 the first clean evaluation (3 laps, every lap done, no off-track; from ``metrics.csv``),
 the best evaluation lap and its ratio to the track's physical-limit lap (the racing line
-of the simulated car, ``agents.pursuit.car_limits`` + ``tracks.raceline``, as
+of the simulated car, ``arena.pursuit.car_limits`` + ``tracks.raceline``, as
 ``slipstream tracks raceline`` reports it), and the off-tracks and collisions of the
 evaluation of the packed model (the run's best evaluation, whose weights ``model.zip``
 holds). ``head_to_model`` starts from the time-trial run
@@ -20,8 +20,8 @@ Run::
     .venv/bin/python benchmarks/race_quality.py --minutes 30 --out runs/race_quality
     .venv/bin/python benchmarks/race_quality.py --only time_trial,head_to_model --minutes 10
 
-The table is also written as markdown to ``OUT/race_quality.md``. ``head_to_model``
-without ``time_trial`` in ``--only`` needs ``OUT/time_trial`` from an earlier run.
+``head_to_model`` without ``time_trial`` in ``--only`` needs ``OUT/time_trial`` from an
+earlier run.
 """
 
 from __future__ import annotations
@@ -31,106 +31,42 @@ import csv
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, get_args
+from typing import get_args
 
-from rich.console import Console
-from rich.table import Table
+from harness import ResultTable, add_record_option, write
 
-from agents import evaluate
-from agents.action_spaces import parse_action_space_spec
 from agents.evaluate import EvalSummary
-from agents.hyperparameters import Hyperparameters
 from agents.privileged import CriticInput
-from agents.pursuit import car_limits
+from agents.recipes import RECIPES, Recipe
+from agents.run import Run
 from agents.selfplay import opponent_policy, read_policy_graph
-from agents.settings import TrainSettings, load_settings
-from agents.train import Trainer, TrainResult, run_hyperparameters
+from agents.settings import TrainSettings
+from agents.train import Trainer, TrainResult
+from arena.pursuit import car_limits
 from arena.race import RaceResult, run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
 
-
-@dataclass(frozen=True)
-class Recipe:
-    """How one race type is trained (the fields of ``TrainSettings`` it sets)."""
-
-    race_type: str
-    sensors: tuple[str, ...]
-    action_space: str  # a spec for agents.action_spaces.parse_action_space_spec
-    reward_fn: str  # bundled sample name
-    track: str = "beginner_loop"
-    network: str | None = None  # None: the preset by sensors (camera: CPU CNN)
-    teacher: str | None = None  # imitate this driver (agents.imitation) instead of PPO
-    workers: int = 2
-    # Simulated seconds an evaluation may run: 3 laps of a car worth measuring take well
-    # under this, and a car stuck behind a box does not cost minutes of training time.
-    eval_time_limit: float = 60.0
-    # DeepRacer's defaults (agents.hyperparameters); a field here overrides one.
-    hyperparameters: dict[str, Any] = field(default_factory=dict)
-    # head_to_model only: clone this recipe's run and race against its model.zip.
-    parent: str | None = None
-    selfplay: str = "shared"
-
-
-RECIPES: dict[str, Recipe] = {
-    "time_trial": Recipe(
-        race_type="time_trial",
-        sensors=("camera",),
-        action_space="continuous:-30:30:0.5:4",
-        reward_fn="pursuit",
-        teacher="pursuit",
-    ),
-    "object_avoidance": Recipe(
-        race_type="object_avoidance",  # arena.make_config's default section: 6 random boxes
-        sensors=("camera", "lidar"),  # the lidar sees boxes (and cars), never the road
-        action_space="continuous:-30:30:0.5:4",
-        reward_fn="object_avoidance",
-        track="slipstream_speedway",  # beginner_loop's 0.76 m leaves a box 0.3 m to pass
-        teacher="pursuit",
-    ),
-    "head_to_bot": Recipe(
-        race_type="head_to_bot",  # arena.make_config's default bots section
-        sensors=("camera", "lidar"),
-        action_space="continuous:-30:30:0.5:3",
-        reward_fn="head_to_head",
-        teacher="pursuit",
-    ),
-    "head_to_model": Recipe(
-        race_type="head_to_model",
-        sensors=("camera",),  # the parent's: a clone needs the same sensors and preset
-        action_space="continuous:-30:30:0.5:4",  # the parent's number of actions
-        reward_fn="head_to_head",
-        teacher="pursuit",  # the passing teacher, racing the pool from behind
-        parent="time_trial",
-        selfplay="pool",
-    ),
-}
+# The race types in training order (a parent before the recipe that clones it).
+RACE_TYPES = ("time_trial", "object_avoidance", "head_to_bot", "head_to_model")
 H2M_RACES = 20  # seeded races of the head-to-model learner against its parent
 H2M_LAPS = 3
 
 
 # --------------------------------------------------------------------------- training
 def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None) -> TrainSettings:
-    """The run's ``TrainSettings`` from a recipe and the command line."""
-    workers = recipe.workers if args.workers is None else args.workers
-    return TrainSettings(
-        track=recipe.track,
-        race_type=recipe.race_type,
-        sensors=recipe.sensors,
-        action_space=parse_action_space_spec(recipe.action_space),
-        reward_fn=recipe.reward_fn,
-        network=recipe.network,
-        critic=args.critic,
-        teacher=recipe.teacher,
-        workers=workers,
-        device=args.device,
-        minutes=args.minutes,
-        eval_every=args.eval_every,
-        eval_time_limit=recipe.eval_time_limit,
-        stop_on_clean_eval=False,
-        selfplay=recipe.selfplay,
-        opponent=(str(opponent),) if opponent else (),
-    )
+    """The run's settings: the recipe, with the command line's budget and choices."""
+    given: dict[str, object] = {
+        "critic": args.critic,
+        "device": args.device,
+        "minutes": args.minutes,
+        "eval_every": args.eval_every,
+    }
+    if args.workers is not None:
+        given["workers"] = args.workers
+    if opponent is not None:
+        given["opponent"] = [opponent]
+    return recipe.settings(given)
 
 
 def train(name: str, args: argparse.Namespace) -> tuple[Path, TrainResult]:
@@ -144,9 +80,8 @@ def train(name: str, args: argparse.Namespace) -> tuple[Path, TrainResult]:
         clone = args.out / recipe.parent
         opponent = parent_zip(clone)
     settings = settings_of(recipe, args, opponent)
-    hp = Hyperparameters(**recipe.hyperparameters)
     print(f"training {name} for {args.minutes:g} min -> {run_dir}", flush=True)
-    result = Trainer(settings, run_dir, hp, clone=clone).run()
+    result = Trainer(settings, run_dir, recipe.hyperparameters_model(), clone=clone).run()
     if result.model_zip is None:
         raise SystemExit(f"{name}: no iteration finished, so no model was written")
     return run_dir, result
@@ -201,25 +136,14 @@ def races_against_parent(run_dir: Path, parent_dir: Path, races: int) -> dict[st
     started. ``behind_margin`` is the learner's mean total time minus the parent's in
     the races it started behind (negative: it won them on average).
     """
-    s = load_settings(run_dir)
-    parent = load_settings(parent_dir)
+    learner = Run.load(run_dir)
+    s, parent = learner.settings, Run.load(parent_dir).settings
     learner_graph = read_policy_graph(run_dir / "model" / "model.zip")
     parent_graph = read_policy_graph(parent_zip(parent_dir))
     wins = overtakes = at_fault = 0
     split = StartSplit()
     for seed in range(races):
-        config = evaluate.evaluation_config(
-            s.track,
-            "head_to_model",
-            s.sensors,
-            s.action_space,
-            laps=H2M_LAPS,
-            seed=seed,
-            time_limit_s=s.eval_time_limit,
-            num_cars=2,
-            stack_size=run_hyperparameters(run_dir).stack_size,
-            direction=s.direction,
-        )
+        config = learner.evaluation_config(laps=H2M_LAPS, seed=seed, num_cars=2)
         learner_car, parent_car = ("car0", "car1") if seed % 2 == 0 else ("car1", "car0")
         policies = {
             learner_car: opponent_policy(learner_graph, s.discrete, name="learner"),
@@ -273,7 +197,7 @@ class StartSplit:
 
 def measure(name: str, run_dir: Path, result: TrainResult, args: argparse.Namespace) -> dict:
     """One table row's numbers for a trained run."""
-    s = load_settings(run_dir)
+    s = Run.load(run_dir).settings
     rows = read_metrics(run_dir)
     elapsed = float(rows[-1]["elapsed_s"])
     steps = sum(int(r["steps"]) for r in rows)
@@ -324,20 +248,12 @@ def cells(row: dict) -> list[str]:
 
 def title(args: argparse.Namespace) -> str:
     """The table's title."""
-    tracks = sorted({RECIPES[n].track for n in args.only})
+    tracks = sorted({RECIPES[n].options["track"] for n in args.only})
     limits = ", ".join(f"{t} {physical_limit_lap(t):.2f} s" for t in tracks)
     return (
         f"race quality after {args.minutes:g} min per race type, {args.critic} critic "
         f"(physical-limit lap: {limits})"
     )
-
-
-def markdown(rows: list[dict], heading: str) -> str:
-    """The table as GitHub markdown."""
-    lines = [f"**{heading}**", "", "| " + " | ".join(c for c, _, _ in COLUMNS) + " |"]
-    lines.append("|" + "---|" * len(COLUMNS))
-    lines += ["| " + " | ".join(cells(r)) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
 
 
 def parse_args() -> argparse.Namespace:
@@ -346,8 +262,8 @@ def parse_args() -> argparse.Namespace:
     parser.add_argument("--minutes", type=float, default=30.0, help="training budget per type")
     parser.add_argument(
         "--only",
-        default=",".join(RECIPES),
-        help=f"comma-separated race types (default: all: {','.join(RECIPES)})",
+        default=",".join(RACE_TYPES),
+        help=f"comma-separated race types (default: all: {','.join(RACE_TYPES)})",
     )
     parser.add_argument("--out", type=Path, help="keep the runs here (default: a temp dir)")
     parser.add_argument("--workers", type=int, help="worker processes (default: the recipe's)")
@@ -360,36 +276,33 @@ def parse_args() -> argparse.Namespace:
         default=TrainSettings.model_fields["critic"].default,
         help="what PPO's critic reads (default: train's)",
     )
+    add_record_option(parser)
     args = parser.parse_args()
     args.only = [n.strip() for n in args.only.split(",") if n.strip()]
-    unknown = [n for n in args.only if n not in RECIPES]
+    unknown = [n for n in args.only if n not in RACE_TYPES]
     if unknown:
-        parser.error(f"unknown race type(s) {unknown}; choose from {', '.join(RECIPES)}")
+        parser.error(f"unknown race type(s) {unknown}; choose from {', '.join(RACE_TYPES)}")
     return args
 
 
 def main() -> None:
-    """Train the selected race types in recipe order, measure them, print the table."""
+    """Train the selected race types in recipe order, measure them, write the table."""
     args = parse_args()
     with tempfile.TemporaryDirectory(prefix="race_quality-") as temp:
         keep = args.out is not None
         args.out = args.out or Path(temp)
         args.out.mkdir(parents=True, exist_ok=True)
         rows = []
-        for name in (n for n in RECIPES if n in args.only):  # parents before children
+        for name in (n for n in RACE_TYPES if n in args.only):  # parents before children
             run_dir, result = train(name, args)
             rows.append(measure(name, run_dir, result, args))
-        heading = title(args)
-        table = Table(title=heading)
-        for column, _, _ in COLUMNS:
-            table.add_column(column)
+        align = "ll" + "r" * (len(COLUMNS) - 2)
+        table = ResultTable(title(args), [c for c, _, _ in COLUMNS], align)
         for row in rows:
             table.add_row(*cells(row))
-        Console(width=200).print(table)
-        report = args.out / "race_quality.md"
-        report.write_text(markdown(rows, heading))
+        write(table, args.record)
         if keep:
-            print(f"runs and {report.name} kept in {args.out}")
+            print(f"runs kept in {args.out}")
 
 
 if __name__ == "__main__":

@@ -9,16 +9,16 @@ Run: ``.venv/bin/python benchmarks/submission_io.py``
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import io
-import statistics
 import tempfile
-import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
+from harness import ResultTable, add_record_option, summary, time_calls, write
 from torch import nn
 
 from arena.actions import default_discrete_space
@@ -74,21 +74,14 @@ def _export(module: nn.Module, example: torch.Tensor, name: str) -> bytes:
 
 
 def _median_ms(step: Callable[[], object]) -> float:
-    for _ in range(WARMUP):
-        step()
-    times = []
-    for _ in range(RUNS):
-        start = time.perf_counter()
-        step()
-        times.append((time.perf_counter() - start) * 1000.0)
-    return statistics.median(times)
+    return 1000.0 * summary(time_calls(step, RUNS, warmup=WARMUP)).median
 
 
 def _row(label: str, module: nn.Module, sensor: str, example: torch.Tensor, tmp: Path) -> list:
     space = default_discrete_space()
     policy_bytes = _export(module.eval(), example, sensor)
     archive = pack(tmp / f"{sensor}.zip", policy_bytes, space, [sensor], network_preset=label)
-    validate_s = min(_timed(lambda: validate(archive)) for _ in range(3))
+    validate_s = min(time_calls(lambda: validate(archive), 3))
     report = validate(archive)
     assert report.ok, report.problems
     obs_space = observation_space((sensor,))
@@ -104,14 +97,11 @@ def _row(label: str, module: nn.Module, sensor: str, example: torch.Tensor, tmp:
             validate_s * 1000.0, ort_ms, torch_ms]  # fmt: skip
 
 
-def _timed(fn: Callable[[], object]) -> float:
-    start = time.perf_counter()
-    fn()
-    return time.perf_counter() - start
-
-
 def main() -> None:
-    """Print the benchmark table (markdown)."""
+    """Measure both presets; write the table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_record_option(parser)
+    args = parser.parse_args()
     torch.manual_seed(0)
     torch.set_num_threads(1)
     n = default_discrete_space().n
@@ -124,14 +114,14 @@ def main() -> None:
         rows = [_row(label, m, s, x, Path(tmp)) for label, m, s, x in cases]
     header = ["policy", "params", "onnx bytes", "zip bytes", "validate ms",
               "onnxruntime ms/step", "torch eager ms/step"]  # fmt: skip
-    print(
+    table = ResultTable("Submission I/O costs", header)
+    table.notes.append(
         f"batch 1, one thread, median of {RUNS} steps after {WARMUP} warm-up; validate = best of 3"
     )
-    print("| " + " | ".join(header) + " |")
-    print("|" + "---|" * len(header))
     for label, params, onnx_b, zip_b, val_ms, ort_ms, torch_ms in rows:
-        print(f"| {label} | {params} | {onnx_b:,} | {zip_b:,} | {val_ms:.0f} | "
-              f"{ort_ms:.3f} | {torch_ms:.3f} |")  # fmt: skip
+        table.add_row(label, params, f"{onnx_b:,}", f"{zip_b:,}", f"{val_ms:.0f}",
+                      f"{ort_ms:.3f}", f"{torch_ms:.3f}")  # fmt: skip
+    write(table, args.record)
 
 
 if __name__ == "__main__":

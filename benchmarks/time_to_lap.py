@@ -1,6 +1,7 @@
 """Time to a clean lap: train from scratch until an evaluation drives 3 laps, 0 off-tracks.
 
-Track ``beginner_loop``, follow-centre-line reward, 3 x 3 discrete actions at 1 m/s. For
+The ``first_laps`` recipe (``agents/recipes.py``): track ``beginner_loop``,
+follow-centre-line reward, 3 x 3 discrete actions at 1 m/s, cheap PPO updates. For
 each sensor case (``camera``, ``camera+lidar`` — DeepRacer's lidar car, whose lidar is
 added to a camera — or ``lidar`` alone, which is blind on an empty track) it reports the
 wall-clock minutes to the first evaluation (race mode, 3 laps, deterministic policy) with
@@ -18,26 +19,25 @@ import time
 from pathlib import Path
 from typing import get_args
 
-from rich.console import Console
-from rich.table import Table
+from harness import ResultTable, add_record_option, write
 
 import arena
 from agents.action_spaces import parse_action_space_spec
-from agents.hyperparameters import Hyperparameters
 from agents.privileged import CriticInput
-from agents.pursuit import PurePursuitPolicy
+from agents.recipes import RECIPES
 from agents.settings import TrainSettings
 from agents.train import Trainer
+from arena.pursuit import PurePursuitPolicy
 from arena.race import run_race
 from tracks.catalog import get_track
 from tracks.raceline import compute_racing_line
 
 CASES = ("camera", "camera+lidar", "lidar")
 DEFAULT_CASES = ("camera", "camera+lidar")
-TRACK = "beginner_loop"
-SPACE = "3x3@1.0"
-# Cheaper updates than DeepRacer's defaults (batch 64, 10 epochs) on a 2-core CPU.
-HYPERPARAMETERS = Hyperparameters(batch_size=64, num_epochs=2, discount_factor=0.99, lr=5e-4)
+# The fast-start recipe: PPO from scratch with cheap updates (agents/recipes.py).
+RECIPE = RECIPES["first_laps"]
+TRACK = RECIPE.options["track"]
+SPACE = RECIPE.options["action_space"]
 
 
 def references() -> tuple[float, float | None]:
@@ -52,22 +52,17 @@ def references() -> tuple[float, float | None]:
 
 def train_case(case: str, max_minutes: float, out: Path, workers: int, critic: CriticInput) -> dict:
     """Train one sensor case until a clean 3-lap evaluation or the time cap."""
-    settings = TrainSettings(
-        track=TRACK,
-        sensors=tuple(case.split("+")),
-        action_space=parse_action_space_spec(SPACE),
-        reward_fn="follow_center_line",
-        minutes=max_minutes,
-        workers=workers,
-        races=max(1, workers),
-        steps_per_env=512 // max(1, workers),
-        eval_every=4,
-        eval_time_limit=240.0,  # 3 laps at the slowest speed (1/3 m/s) fit
-        stop_on_clean_eval=True,
-        critic=critic,
-    )
+    given = {
+        "sensors": case.replace("+", ","),
+        "minutes": max_minutes,
+        "workers": workers,
+        "races": max(1, workers),  # one race a worker: the recipe's 512 steps split evenly
+        "critic": critic,
+    }
+    settings = RECIPE.settings(given, stop_on_clean_eval=True)
     started = time.monotonic()
-    result = Trainer(settings, out / case.replace("+", "_"), HYPERPARAMETERS).run()
+    run_dir = out / case.replace("+", "_")
+    result = Trainer(settings, run_dir, RECIPE.hyperparameters_model()).run()
     evaluations = {s.elapsed_s: s.eval for s in result.evaluations if s.eval is not None}
     best = max(evaluations.values(), key=lambda e: e.progress, default=None)
     clean = evaluations.get(result.first_clean_eval_s)
@@ -101,17 +96,16 @@ def main() -> None:
         default=TrainSettings.model_fields["critic"].default,
         help="what PPO's critic reads (default: train's)",
     )
+    add_record_option(parser)
     args = parser.parse_args()
     cases = args.case or list(DEFAULT_CASES)
     limit, pursuit = references()
     rows = [train_case(c, args.max_minutes, args.out, args.workers, args.critic) for c in cases]
-    table = Table(
-        title=f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line, {args.critic} critic)"
-    )
     columns = ("policy", "minutes to clean 3 laps", "iterations", "clean run: best lap / total")
-    for column in (*columns, "best eval lap (s)"):
-        table.add_column(column)
-    table.add_column("best eval completion")
+    table = ResultTable(
+        f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line, {args.critic} critic)",
+        (*columns, "best eval lap (s)", "best eval completion"),
+    )
     for r in rows:
         reached = f"{r['minutes']:.1f}" if r["minutes"] else f"not in {args.max_minutes:g}"
         lap = f"{r['best_lap']:.2f}" if r["best_lap"] else "-"
@@ -124,7 +118,7 @@ def main() -> None:
         "pure pursuit (baseline)", "-", "-", "-", f"{pursuit:.2f}" if pursuit else "-", ""
     )
     table.add_row("physical limit (raceline)", "-", "-", "-", f"{limit:.2f}", "")
-    Console(width=140).print(table)
+    write(table, args.record)
 
 
 if __name__ == "__main__":

@@ -27,8 +27,7 @@ import time
 from pathlib import Path
 
 import torch
-from rich.console import Console
-from rich.table import Table
+from harness import ResultTable, add_record_option, write
 
 import arena
 from agents import networks
@@ -103,7 +102,8 @@ def measure(
 
 
 def main() -> None:
-    """Parse arguments, measure each worker count, print the table."""
+    """Parse arguments, measure each worker count, write the table."""
+    started = time.monotonic()
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--preset", default=None, help="network preset (default: by sensors)")
     parser.add_argument("--sensors", default="camera")
@@ -122,6 +122,7 @@ def main() -> None:
     )
     parser.add_argument("--threads", type=int, default=1, help="torch threads")
     parser.add_argument("--profile", action="store_true")
+    add_record_option(parser)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
@@ -131,12 +132,13 @@ def main() -> None:
         for w in args.workers.split(",")
         for critic in args.critic.split(",")
     ]
-    table = Table(title=f"training cost: {args.sensors}, {args.iterations} iterations")
-    for column in (
+    columns = (
         "device", "workers", "races", "preset", "critic", "samples/it", "minibatches/it",
         "samples/s", "collect s/it", "update s/it", "update share", "value loss",
-    ):  # fmt: skip
-        table.add_column(column)
+    )  # fmt: skip
+    table = ResultTable(
+        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrrllrrrrrrr"
+    )
     for r in rows:
         total = r["collect_s"] + r["update_s"]
         table.add_row(
@@ -153,10 +155,9 @@ def main() -> None:
             f"{r['update_s'] / total:.0%}",
             f"{r['value_loss']:.3g}",
         )
-    Console(width=140).print(table)
+    table.notes.append(f"wall {time.monotonic() - started:.0f} s")
+    write(table, args.record)
 
 
 if __name__ == "__main__":
-    started = time.monotonic()
     main()
-    print(f"wall {time.monotonic() - started:.0f} s")
