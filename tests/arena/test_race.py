@@ -8,11 +8,44 @@ import pytest
 from agents.action_spaces import continuous_action_space
 from arena.cli import print_results
 from arena.config import RaceConfig, resolve_track
+from arena.drivers import LaneFollowerPolicy
 from arena.pursuit import PurePursuitPolicy
 from arena.race import RaceResult, run_race
 from arena.spawn import GRID_GAP_M
 
 TRACK = "slipstream_speedway"
+
+
+def test_cars_that_did_not_finish_are_placed_by_laps_then_distance() -> None:
+    """Three laps in 12 s: nobody finishes. ``sprinter`` (2 m/s, inner lane, front slot)
+    laps ``crawler`` (0.5 m/s) and ``straggler`` (0.15 m/s), which both keep to the outer
+    lane, so nobody touches: one lap beats none, and between no laps the longer way
+    driven comes first (names sort the other way round: ``crawler`` < ``sprinter``)."""
+    plan = {"sprinter": (2.0, "inner"), "crawler": (0.5, "outer"), "straggler": (0.15, "outer")}
+    space = continuous_action_space(speed_low=0.1, speed_high=2.0)
+    config = RaceConfig.build(
+        track="beginner_loop",
+        race_type="head_to_model",
+        laps=3,
+        time_limit_s=12.0,
+        variation={"shuffle_grid": False},
+        cars=[{"name": name, "sensors": ("sector_lidar",), "action_space": space} for name in plan],
+    )
+    track, _ = resolve_track(config)
+    policies = {}
+    for name, (speed, lane) in plan.items():
+        policies[name] = LaneFollowerPolicy(track, space, speed=speed)
+        policies[name].follower.lane = lane
+    result = run_race(config, policies, record_trace=False)
+    sprinter, crawler, straggler = (result.car(name) for name in plan)
+    assert {car.status for car in result.cars} == {"time_up"}
+    assert all(event["kind"] != "contact" for event in result.events)
+    assert sprinter.laps == 1 and crawler.laps == straggler.laps == 0
+    assert crawler.distance > straggler.distance + 1.0
+    assert result.finish_order == ["sprinter", "crawler", "straggler"]
+    positions = [car.finish_position for car in (sprinter, crawler, straggler)]
+    assert positions == [1, 2, 3]
+    assert all(car.gap_to_winner is None for car in result.cars)
 
 
 def _duel(seed: int) -> RaceResult:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from arena.racing_metrics import PASS_MARGIN_M, CarStep, Contact, RacingMetrics
+from arena.racing_metrics import CarStep, Contact, RacingMetrics
 
 GRID = {"a": 0.0, "b": -0.8}  # b starts 0.8 m behind a
 
@@ -45,9 +45,25 @@ def test_swapping_places_back_and_forth_counts_each_pass() -> None:
 
 def test_jitter_within_the_margin_is_not_a_pass() -> None:
     metrics = RacingMetrics({"a": 0.0, "b": 0.0})
-    wobble = [0.4 * PASS_MARGIN_M * (-1) ** i for i in range(20)]
+    wobble = [0.02 * (-1) ** i for i in range(20)]  # 2 cm either way: within the 5 cm margin
     _drive(metrics, [{"a": _step(2.0 + d), "b": _step(2.0)} for d in wobble])
     assert metrics.events == []
+
+
+def test_a_pass_needs_more_than_five_centimetres_either_way() -> None:
+    """A car that draws level, gets its nose 3 cm ahead and falls back has not passed; one
+    that gets 8 cm ahead has. The same for the car passed back: first b passes a, then a
+    passes b back."""
+    metrics = RacingMetrics({"a": 0.0, "b": 0.0})  # level: grid order puts a ahead
+    lead = [0.5, 0.5, 0.5]  # a's lead over b, step by step: a ahead, both settled
+    lead += [0.1, -0.03, 0.1, 0.5]  # b draws level, 3 cm ahead, falls back: no pass
+    lead += [-0.08, -0.5]  # b gets 8 cm ahead: b passes a
+    lead += [-0.1, 0.03, -0.1, -0.5]  # a draws level, 3 cm ahead, falls back: no pass
+    lead += [0.08, 0.5]  # a gets 8 cm ahead: a passes b back
+    _drive(metrics, [{"a": _step(2.0 + d), "b": _step(2.0)} for d in lead])
+    assert [(e.car, e.other) for e in metrics.events] == [("b", "a"), ("a", "b")]
+    assert [round(e.t, 1) for e in metrics.events] == [0.8, 1.4]
+    assert metrics.cars["a"].overtakes == metrics.cars["b"].overtakes == 1
 
 
 def test_passing_a_car_serving_a_penalty_does_not_count() -> None:

@@ -7,7 +7,7 @@ import pytest
 
 import arena
 from agents.action_spaces import continuous_action_space
-from arena.config import RaceConfig, resolve_track
+from arena.config import NO_VARIATION, RaceConfig, resolve_track
 from arena.pursuit import PurePursuitPolicy
 from arena.race import run_race
 from arena.spawn import (
@@ -62,6 +62,37 @@ def test_a_released_car_has_a_car_length_of_room() -> None:
         if not env.agents:
             break
     assert releases >= 5
+    env.close()
+
+
+def test_cars_respawned_in_the_same_step_choose_in_race_order() -> None:
+    """Two cars leave the track in the same step, 25 cm apart (too close for both to
+    come back at their own spots): the race leader gets its own spot, the other gives
+    way behind it. The leader is car1, listed (and starting) second, so neither the
+    listed order nor the grid order picks the same car."""
+    config = arena.make_config(
+        race_type="head_to_model", num_cars=2, laps=1, time_limit_s=30.0, variation=NO_VARIATION
+    )
+    env = arena.parallel_env(config=config)
+    env.reset()
+    track = env.track
+    for name, arc in (("car0", 3.0), ("car1", 3.25)):  # 0.8 m outside the right border
+        (x, y), _ = track.pose_at(arc)
+        outside = -(0.5 * track.project(np.array([[x, y]])).track_width[0] + 0.8)
+        spot = place(track, arc, outside)
+        env._cars[name].car.teleport(spot.x, spot.y, spot.yaw)
+    _, _, _, _, infos = env.step({"car0": 4, "car1": 4})
+    assert {infos[a]["episode_status"] for a in ("car0", "car1")} == {"off_track"}
+    assert infos["car1"]["distance"] > infos["car0"]["distance"]  # car1 leads the race
+    left = {a: np.array([[infos[a]["params"]["x"], infos[a]["params"]["y"]]]) for a in infos}
+    leader_arc = float(track.project(left["car1"]).arc_length[0])
+    own = place(track, leader_arc, "outer")  # right of centre on this ccw loop
+    poses = env.car_poses()
+    assert poses["car1"][:2] == pytest.approx((own.x, own.y), abs=1e-6)
+    back = env._cars["car0"].car.footprint()
+    assert polygon_gap(back, env._cars["car1"].car.footprint()) >= RESPAWN_CLEARANCE_M - 1e-3
+    back_arc = float(track.project(np.array([poses["car0"][:2]])).arc_length[0])
+    assert track.arc_delta(leader_arc, back_arc) < 0.0  # behind the leader
     env.close()
 
 
