@@ -35,7 +35,12 @@ def ellipse() -> Track:
 
 @pytest.fixture(scope="session")
 def shared_tracks() -> Path:
-    """The real DeepRacer track folder; skips the test when it is absent."""
+    """The real DeepRacer track folder (``../shared/deepracer-data/tracks`` beside the
+    checkout): every ``realdata`` test reads it through this fixture, and skips, naming the
+    folder it looked in, when it is absent."""
     if not SHARED_TRACKS.is_dir():
-        pytest.skip(f"real DeepRacer track files not found at {SHARED_TRACKS}")
+        pytest.skip(
+            f"realdata: no DeepRacer track folder at {SHARED_TRACKS} "
+            "(the tests read ../shared/deepracer-data beside the checkout)"
+        )
     return SHARED_TRACKS

@@ -10,11 +10,13 @@ import torch
 from typer.testing import CliRunner
 
 import arena
+from agents import networks
 from agents.action_spaces import parse_action_space_spec
 from agents.cli import app
 from agents.hyperparameters import Hyperparameters
-from agents.imitation import EXPERT_GROUP
+from agents.imitation import EXPERT_GROUP, imitation_config
 from agents.run import Run
+from agents.runner import RacingRunner
 from agents.settings import TrainSettings
 from agents.train import Trainer
 from agents.vecenv import RacingVecEnv
@@ -52,6 +54,37 @@ def test_a_discrete_teacher_gives_one_hot_rows():
         env.close()
     assert rows.shape == (2, DISCRETE.n)
     assert torch.equal(rows.sum(dim=1), torch.ones(2)) and set(rows.unique().tolist()) == {0, 1}
+
+
+def test_a_discrete_student_learns_the_teachers_action_not_its_own():
+    """Where the teacher picks another action than the student's most likely one, an update
+    moves the student to the teacher's action (cross-entropy on the teacher's labels)."""
+    env = _env(DISCRETE)
+    try:
+        actor, critic, groups = networks.model_configs("dense 256-256", ("lidar",), DISCRETE)
+        hp = Hyperparameters(num_epochs=4, batch_size=8)
+        steps = 4
+        cfg = imitation_config(hp.to_rsl_rl(env.num_envs, actor, critic, groups, steps), True)
+        alg = RacingRunner(env, cfg, log_dir=None, device="cpu").alg
+        obs = env.get_observations()
+    finally:
+        env.close()
+
+    def probabilities() -> torch.Tensor:
+        alg.student(obs, stochastic_output=True)
+        return alg.student.distribution.mean.detach()
+
+    before = probabilities()
+    taught = (before.argmax(dim=1) + 1) % DISCRETE.n  # never the student's own choice
+    obs[EXPERT_GROUP] = torch.nn.functional.one_hot(taught, DISCRETE.n).float()
+    for _ in range(steps):
+        alg.act(obs)
+        alg.process_env_step(obs, torch.zeros(env.num_envs), torch.zeros(env.num_envs), {})
+    alg.update()
+    after = probabilities()
+    rows = torch.arange(env.num_envs)
+    assert (after[rows, taught] > before[rows, taught]).all(), (before, after, taught)
+    assert torch.equal(after.argmax(dim=1), taught), (after, taught)
 
 
 def _student_error(actor: torch.nn.Module, steps: int = 150) -> tuple[float, float]:

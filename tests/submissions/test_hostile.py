@@ -9,6 +9,7 @@ import subprocess
 import sys
 import warnings
 import zipfile
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -18,6 +19,7 @@ import pytest
 from onnx import TensorProto, helper
 
 from submissions import Limits, Problem, ValidationReport, validate
+from submissions.archive import read_archive
 from submissions.onnx_checks import ALLOWED_OPS
 from tests.submissions.hostile_models import wide_mlp
 from tests.submissions.test_support import (
@@ -130,11 +132,27 @@ def _patch_headers(
 
 
 def test_zip_bomb_lying_header() -> None:
-    """Headers claim 1000 bytes; the stream holds 3 MB of zeros."""
+    """Headers claim 1000 bytes; the stream holds 3 MB of zeros. Reading stops at the
+    declared size, so the lie shows as a CRC mismatch; with the CRC patched to match, the
+    member is its first 1000 bytes: nothing past the declared size is ever inflated."""
     data = bytearray(zip_of([("model_metadata.json", b"{}"), ("policy.onnx", bytes(3 << 20))]))
     _patch_headers(data, b"policy.onnx", 22, 24, "<I", 1000)
-    p = refused(bytes(data), Limits(max_compression_ratio=1e9))
-    assert p.field == "archive:policy.onnx"
+    p = refused(bytes(data))
+    assert p.field == "archive:policy.onnx" and "could not be decompressed" in p.message
+    assert "CRC" in p.found
+    _patch_headers(data, b"policy.onnx", 14, 16, "<I", zlib.crc32(bytes(1000)))
+    members, problems = read_archive(bytes(data), DEFAULT)
+    assert members is not None and members["policy.onnx"] == bytes(1000), problems
+
+
+def test_total_uncompressed_cap() -> None:
+    """Members each within their own cap but over the total together: refused on the
+    declared sizes; exactly the total passes."""
+    total = sum(len(content) for content in MEMBERS.values())
+    p = refused(VALID, Limits(max_total_uncompressed_bytes=total - 1))
+    assert p.field == "archive" and "expands to more than the format allows" in p.message
+    assert f"at most {total - 1} bytes" in p.expected and f"{total} bytes" in p.found
+    assert validate(VALID, Limits(max_total_uncompressed_bytes=total)).ok
 
 
 def test_member_count_cap() -> None:

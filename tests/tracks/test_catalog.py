@@ -20,11 +20,6 @@ from tracks.catalog import (
 from tracks.io import TrackFileError, write_document
 from tracks.track import TrackError
 
-DATA = Path(__file__).resolve().parents[3] / "shared" / "deepracer-data" / "tracks"
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"real DeepRacer tracks not found at {DATA}"
-)
-
 
 @pytest.fixture(autouse=True)
 def home(tmp_path, monkeypatch):
@@ -144,10 +139,9 @@ def test_unreadable_user_file_is_skipped_in_listing(home):
     assert "bad" not in {i.name for i in list_tracks()}
 
 
-@needs_data
 @pytest.mark.realdata
-def test_import_real_deepracer_file(home):
-    track = import_track(DATA / "reinvent_base.npy")
+def test_import_real_deepracer_file(home, shared_tracks):
+    track = import_track(shared_tracks / "reinvent_base.npy")
     assert track.name == "reinvent_base"
     assert track.length == pytest.approx(17.7, abs=0.1)
     assert _user_files(home) == ["reinvent_base.json"]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -12,10 +11,6 @@ from tracks.catalog import builtin_names, get_track
 from tracks.cli import app
 from tracks.io import write_document
 
-DATA = Path(__file__).resolve().parents[3] / "shared" / "deepracer-data" / "tracks"
-needs_data = pytest.mark.skipif(
-    not DATA.is_dir(), reason=f"real DeepRacer tracks not found at {DATA}"
-)
 runner = CliRunner()
 
 
@@ -86,10 +81,9 @@ def test_import_refuses_builtin_name(tmp_path):
     assert "my_tour" in _ok("list").stdout
 
 
-@needs_data
 @pytest.mark.realdata
-def test_import_real_file_then_raceline(home):
-    _ok("import", str(DATA / "reinvent_base.npy"))
+def test_import_real_file_then_raceline(home, shared_tracks):
+    _ok("import", str(shared_tracks / "reinvent_base.npy"))
     assert (home / "tracks" / "reinvent_base.json").is_file()
     doc = json.loads(_ok("raceline", "reinvent_base", "--json").stdout)
     assert doc["track"] == "reinvent_base"
