@@ -4,14 +4,24 @@ and a race repeating an earlier one's (lineup, ruleset, seed) is not rated again
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 
 import pytest
 from sqlalchemy import select
 
-from league.models import Rating
+from arena.config import RaceConfig
+from league.models import Event, Rating
 from league.ranking import Skill
 from tests.league.conftest import League
-from tests.league.helpers import car, create_event, enter, record, upload
+from tests.league.helpers import (
+    car,
+    create_event,
+    enter,
+    race_result,
+    record,
+    record_as_worker,
+    upload,
+)
 
 
 def ratings(league: League, event_id: int) -> dict[int, Skill]:
@@ -73,3 +83,25 @@ def test_a_repeated_race_is_not_rated_again(
     record(league, event_id, cars, seed=9)
     third = ratings(league, event_id)
     assert third[m1].races == 3 and third[m3].races == 1
+
+
+def test_the_same_lineup_and_seed_under_other_rules_is_rated_again(
+    league: League, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.INFO, logger="slipstream.ranking")
+    event_id, [(e1, m1), (e2, m2), _] = duel(league, "Rules moved on", (77, 78, 79))
+    cars = {e1: car("a"), e2: car("b", laps=[12.0, 12.0, 12.0], finish_position=2)}
+    record(league, event_id, cars, seed=4)
+    first = ratings(league, event_id)
+    # A worker whose rules differ (here a longer time limit, as when an upgrade changes a
+    # rule's default) races the same lineup on the same seed: another race, not a copy.
+    with league.sessions() as session:
+        result = race_result(session.get_one(Event, event_id), list(cars.values()), seed=4)
+    rules = {**result.config.ruleset(), "time_limit_s": result.config.time_limit_s + 60.0}
+    config = RaceConfig.build(**rules, cars=result.config.cars, seed=4)
+    assert config.ruleset_hash() != result.config.ruleset_hash()
+    record_as_worker(league, event_id, replace(result, config=config), {"a": e1, "b": e2})
+    second = ratings(league, event_id)
+    assert second[m1].races == second[m2].races == 2
+    assert second[m1].mu > first[m1].mu and second[m2].mu < first[m2].mu
+    assert "not rated" not in caplog.text

@@ -21,6 +21,7 @@ from league.http.read_cache import Prepared, ReadCache
 from league.web import queries
 from tests.league.conftest import League, free_port
 from tests.league.helpers import car, create_event, enter, record, upload
+from tests.league.page_text import read_page
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -81,6 +82,44 @@ def test_a_recorded_result_changes_etag_and_body(league: League, cup: dict) -> N
         races = client.get(f"/api/races?event={event}").json()
     assert board["rows"][0]["alias"] == "bob" and board["rows"][0]["best_lap_ms"] == 8000
     assert races[0]["id"] == race
+
+
+def head_to_head_rows(client: httpx.Client, event: int) -> list[list[str]]:
+    """The head-to-head table of the event's page, as read: one row of cell texts each."""
+    response = client.get(f"/events/{event}")
+    assert response.status_code == 200
+    return read_page(response.text).tables["head-to-head"]
+
+
+def test_pages_show_each_new_result(league: League, cup: dict) -> None:
+    event = create_event(league, name="Cache Duel", race_type="head_to_model")["id"]
+    entries = {}
+    for who, seed in (("alice", 34), ("bob", 35)):
+        model = upload(league, who, seed, name=f"{who}-duel")["id"]
+        entries[who] = enter(league, who, event, model)["entry_id"]
+    slow = [12.0, 12.0, 12.0]
+    alice, bob = "alice · alice-duel", "bob · bob-duel"
+    with league.client() as client:
+        assert head_to_head_rows(client, event) == [["No races yet."]]
+        cars = {entries["alice"]: car("alice")}
+        cars[entries["bob"]] = car("bob", laps=slow, finish_position=2)
+        first = record(league, event, cars, seed=1)
+        assert head_to_head_rows(client, event) == [[alice, "1", "0", bob, "1", "0 / 0"]]
+        before = {p: client.get(p) for p in (f"/races/{first}", f"/api/races/{first}")}
+
+        cars = {entries["alice"]: car("alice", laps=slow, finish_position=2)}
+        cars[entries["bob"]] = car("bob", laps=[8.0, 8.0, 8.0])
+        second = record(league, event, cars, seed=2)
+        assert head_to_head_rows(client, event) == [[alice, "1", "1", bob, "2", "0 / 0"]]
+        page = read_page(client.get(f"/races/{second}").text)
+        assert f"Cache Duel › race {second} (seed 2)" in page.text
+        shown = client.get(f"/api/races/{second}").json()
+        for path, response in before.items():  # an earlier race is as it was
+            again = client.get(path, headers={"If-None-Match": response.headers["etag"]})
+            assert again.status_code == 304, path
+    winner = {c["alias"]: c for c in shown["cars"]}["bob"]
+    assert (shown["id"], winner["finish_position"], winner["best_ms"]) == (second, 1, 8000)
+    assert f"Cache Duel › race {first} (seed 1)" in read_page(before[f"/races/{first}"].text).text
 
 
 def test_a_new_entry_changes_the_home_page(league: League, cup: dict) -> None:

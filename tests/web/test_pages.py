@@ -2,36 +2,88 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from tests.league.conftest import League
+from tests.league.page_text import read_page
 from tests.web.data import METRICS_CSV, Site, model_with_metrics
 
 
 def test_home_lists_events_with_thumbnails_racers_and_status(league: League, site: Site) -> None:
     with league.client() as client:
         html = client.get("/").text
-    assert "Autumn Time Trial" in html and "Head-to-Head Cup" in html
+    page = read_page(html)
+    assert {"Autumn Time Trial", "Head-to-Head Cup"} <= set(page.headings)
     assert html.count("<svg") >= 2
     assert f'href="/events/{site.time_trial}"' in html
-    assert "3 racers" in html and "2 racers" in html
-    assert "time trial" in html and "head to model" in html
+    assert "3 racers" in page.text and "2 racers" in page.text
+    assert "time trial" in page.text and "head to model" in page.text
 
 
-def test_event_race_model_and_upload_pages_render(league: League, site: Site) -> None:
+def test_event_page_names_the_event_and_its_rules(league: League, site: Site) -> None:
     with league.client() as client:
-        for path in (
-            f"/events/{site.time_trial}",
-            f"/races/{site.races['alice']}",
-            f"/models/{site.models['alice']}",
-            "/upload",
-            "/static/replay.js",
-            "/static/style.css",
-        ):
-            response = client.get(path)
-            assert response.status_code == 200, path
-        assert client.get("/races/999999").status_code == 404
-        assert client.get("/events/999999").status_code == 404
+        trial = read_page(client.get(f"/events/{site.time_trial}").text)
+        duel = read_page(client.get(f"/events/{site.head_to_head}").text)
+        missing = client.get("/events/999999")
+    assert trial.headings[0] == "Autumn Time Trial" and "Autumn Time Trial" in trial.title
+    for words in ("open", "time trial", "beginner loop", "ranked by total time", "Latest races"):
+        assert words in trial.text, words
+    assert re.search(r"\b1 lap\b", trial.text)
+    assert "Head to head" not in trial.headings
+    assert duel.headings[:2] == ["Head-to-Head Cup", "Head to head"]
+    assert "head to model" in duel.text and "ranked by rating" in duel.text
+    (row,) = duel.tables["head-to-head"]
+    assert (row[0], row[3], row[4]) == ("alice · alice-model", "bob · bob-model", "2")
+    assert int(row[1]) + int(row[2]) == 2  # each race: one model ahead of the other
+    assert missing.status_code == 404 and missing.json()["detail"] == "Event 999999 not found."
+
+
+def test_leaderboard_lists_each_racers_counting_race_and_time(league: League, site: Site) -> None:
+    with league.client() as client:
+        rows = client.get(f"/api/events/{site.time_trial}/leaderboard").json()["rows"]
+        races = {
+            who: client.get(f"/api/races/{site.races[who]}").json() for who in ("alice", "bob")
+        }
+    shown = {row["alias"]: row for row in rows}
+    for who, race in races.items():
+        (result,) = race["cars"]
+        assert result["alias"] == who and shown[who]["race_id"] == race["id"]
+        assert shown[who]["total_time_ms"] == result["total_ms"] is not None
+        assert shown[who]["best_lap_ms"] == result["best_ms"]
+    times = [row["total_time_ms"] for row in rows if row["total_time_ms"] is not None]
+    assert [row["rank"] for row in rows] == list(range(1, len(rows) + 1))
+    assert times == sorted(times) and shown["alice"]["rank"] < shown["bob"]["rank"]
+
+
+def test_replay_page_names_its_race_and_its_cars(league: League, site: Site) -> None:
+    race_id = site.races["h2h1"]
+    with league.client() as client:
+        page = read_page(client.get(f"/races/{race_id}").text)
+        race = client.get(f"/api/races/{race_id}").json()
+        missing = client.get("/races/999999")
+    assert page.title.startswith(f"Race {race_id}")
+    assert f"Head-to-Head Cup › race {race_id} (seed 1)" in page.text
+    assert "Cars" in page.headings
+    cars = sorted((c["alias"], c["car_name"], c["finish_position"]) for c in race["cars"])
+    assert [car[:2] for car in cars] == [("alice", "alice"), ("bob", "bob")]
+    assert sorted(car[2] for car in cars) == [1, 2]
+    assert missing.status_code == 404 and missing.json()["detail"] == "Race 999999 not found."
+
+
+def test_model_and_upload_pages_say_what_they_are(league: League, site: Site) -> None:
+    model_id = site.models["alice"]
+    with league.client() as client:
+        model = read_page(client.get(f"/models/{model_id}").text)
+        upload = read_page(client.get("/upload").text)
+        script, style = client.get("/static/replay.js"), client.get("/static/style.css")
+    assert model.headings[:2] == [f"Model {model_id}", "Validation report"]
+    assert "Results" in model.headings
+    assert upload.headings[0] == "Upload a model" and "Your models" in upload.headings
+    assert "Model file" in upload.text and "Name (optional)" in upload.text
+    assert script.status_code == style.status_code == 200
+    assert "javascript" in script.headers["content-type"]
+    assert style.headers["content-type"].startswith("text/css")
 
 
 def test_pages_stay_out_of_the_api_schema(league: League, site: Site) -> None:
