@@ -3,7 +3,9 @@
 Starts ``python -m league serve`` on loopback in a fresh data directory, then a separate
 load process that posts ``--clients`` anonymous JSON bodies of ``--mb`` MB at once to
 ``POST /api/events/1/entries``. Meanwhile this process samples the server's RSS
-(``/proc/PID/status``) and times ``GET /healthz`` every 50 ms. Prints one table.
+(``/proc/PID/status``) and times ``GET /healthz`` every 50 ms. Then it trickles a small body
+in, a byte every 0.1 s, and times the 408 that cuts it off (the server's body deadline set
+to ``DEADLINE_S``). Prints one table.
 
     .venv/bin/python benchmarks/body_flood.py [--clients 8] [--mb 50]
 
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import select
 import socket
 import subprocess
@@ -26,10 +29,13 @@ from harness import ResultTable, add_record_option, rss_kib, start_league, write
 
 PATH = "/api/events/1/entries"
 CHUNK = 1024 * 1024
+DEADLINE_S = 1.0  # the server's deadline for a (non-upload) body to arrive
+TRICKLE_S = 0.1
 
 
-def post(port: int, body: bytes) -> tuple[int, float]:
-    """Send ``body`` like a browser would: stop sending once the server answers."""
+def post(port: int, body: bytes, chunk: int = CHUNK, pause_s: float = 0.0) -> tuple[int, float]:
+    """Send ``body`` like a browser would, ``chunk`` bytes every ``pause_s``: stop sending
+    once the server answers. The status, and the seconds from connecting to the answer."""
     start = time.monotonic()
     head = (
         f"POST {PATH} HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
@@ -38,10 +44,10 @@ def post(port: int, body: bytes) -> tuple[int, float]:
     with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
         sock.sendall(head.encode())
         try:
-            for offset in range(0, len(body), CHUNK):
-                if select.select([sock], [], [], 0)[0]:
+            for offset in range(0, len(body), chunk):
+                if select.select([sock], [], [], pause_s)[0]:
                     break  # answered early: the rest is not wanted
-                sock.sendall(body[offset : offset + CHUNK])
+                sock.sendall(body[offset : offset + chunk])
         except OSError:
             pass  # the server closed after answering
         answer = sock.recv(64)
@@ -72,10 +78,11 @@ def healthz_seconds(port: int) -> float:
 
 
 def measure(clients: int, megabytes: int, record: bool) -> None:
-    """Flood a fresh server; write the table."""
+    """Flood a fresh server, then trickle a body into it; write the table."""
+    env = {**os.environ, "SLIPSTREAM_BODY_TIMEOUT_SECONDS": str(DEADLINE_S)}
     with (
         tempfile.TemporaryDirectory(prefix="body-flood-") as data_dir,
-        start_league("--data-dir", data_dir) as server,
+        start_league("--data-dir", data_dir, env=env) as server,
     ):
         port, pid = server.port, server.process.pid
         time.sleep(0.5)
@@ -91,6 +98,7 @@ def measure(clients: int, megabytes: int, record: bool) -> None:
             time.sleep(0.05)
         elapsed = time.monotonic() - started
         results = json.loads(loader.stdout.read())
+        trickled, cut_off = post(port, b" " * 300, chunk=1, pause_s=TRICKLE_S)
     statuses = sorted({status for status, _ in results})
     slowest = max(seconds for _, seconds in results)
     title = f"{clients} anonymous {megabytes} MB JSON posts at once to POST {PATH}"
@@ -103,6 +111,8 @@ def measure(clients: int, megabytes: int, record: bool) -> None:
         ("server RSS peak (MB)", f"{peak:.0f}"),
         ("server RSS growth (MB)", f"{peak - idle:.0f}"),
         ("worst /healthz meanwhile (s)", f"{worst:.3f}"),
+        (f"a body trickled at 1 byte / {TRICKLE_S:g} s: answer", str(trickled)),
+        (f"... its answer after the {DEADLINE_S:g} s deadline (s)", f"{cut_off - DEADLINE_S:.3f}"),
     ]
     for name, value in rows:
         table.add_row(name, value)

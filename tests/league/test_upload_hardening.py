@@ -1,7 +1,8 @@
-"""Hostile uploads against a real server: refused quickly, in a child, a few at once.
+"""Hostile uploads against a real server: refused in a child, under its limits, a few at once.
 
 The server runs in this process (a thread), so this process's memory is the API process's:
-a file that made the API build its onnxruntime session would show in ``VmHWM`` here.
+a file that made the API build its onnxruntime session would show in ``VmHWM`` here. How
+fast the refusals and ``/healthz`` answer is measured by ``benchmarks/hostile_uploads.py``.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ from tests.league.helpers import model_rows
 from tests.submissions.hostile_models import broadcast_bomb, matmul_chain, wide_mlp
 
 MiB = 1024 * 1024
+# Only a bound on a hung server: /healthz answers in milliseconds.
+HANG_GUARD_S = 30.0
 
 
 @pytest.fixture(scope="module")
@@ -48,11 +51,9 @@ def _peak_rss() -> int:
     raise AssertionError("no VmHWM")
 
 
-def _post(league: League, data: bytes, who: str = "alice") -> tuple[httpx.Response, float]:
-    start = time.monotonic()
+def _post(league: League, data: bytes, who: str = "alice") -> httpx.Response:
     with league.client(who) as client:
-        response = client.post("/api/models", files={"file": ("m.zip", data)})
-    return response, time.monotonic() - start
+        return client.post("/api/models", files={"file": ("m.zip", data)})
 
 
 def _at_once(league: League, files: list[bytes]) -> list[httpx.Response]:
@@ -61,54 +62,57 @@ def _at_once(league: League, files: list[bytes]) -> list[httpx.Response]:
 
     def send(data: bytes) -> httpx.Response:
         gate.wait()
-        return _post(league, data)[0]
+        return _post(league, data)
 
     with ThreadPoolExecutor(len(files)) as pool:
         return list(pool.map(send, files))
 
 
-def _refused(league: League, data: bytes) -> tuple[list[dict], float]:
+def _refused(league: League, data: bytes) -> list[dict]:
     """Upload ``data``; assert a 422 that left no row, keeping the API's memory flat."""
     rows, peak = model_rows(league), _peak_rss()
-    response, seconds = _post(league, data)
+    response = _post(league, data)
     assert response.status_code == 422, response.text
     assert _peak_rss() - peak < 200 * MiB
     assert model_rows(league) == rows
-    return response.json()["problems"], seconds
+    return response.json()["problems"]
 
 
 def test_broadcast_bomb_is_refused_by_the_static_check(league: League) -> None:
-    (problem,), seconds = _refused(league, broadcast_bomb(16384))
+    (problem,) = _refused(league, broadcast_bomb(16384))
     assert problem["field"] == "policy.onnx:graph" and "race's memory" in problem["message"]
-    assert "(16384, 16384)" in problem["found"] and seconds < 10
+    assert "(16384, 16384)" in problem["found"]
 
 
 def test_hidden_bomb_hits_the_childs_memory_limit(league: League) -> None:
-    (problem,), seconds = _refused(league, broadcast_bomb(16384, hidden=True))
+    (problem,) = _refused(league, broadcast_bomb(16384, hidden=True))
     assert problem["message"] == "The policy needs more memory than a race allows."
-    assert f"{league.settings.race_memory_mb} MiB" in problem["expected"] and seconds < 10
+    assert f"{league.settings.race_memory_mb} MiB" in problem["expected"]
 
 
 def test_matmul_chain_is_refused_by_the_static_check(league: League) -> None:
-    problems, seconds = _refused(league, matmul_chain(1500, size=128))
-    (problem,) = problems
+    (problem,) = _refused(league, matmul_chain(1500, size=128))
     assert problem["field"] == "policy.onnx:graph" and "too much arithmetic" in problem["message"]
-    assert seconds < 10
 
 
 def test_hidden_matmul_chain_hits_the_childs_cpu_limit(tmp_path: Path) -> None:
-    settings = Settings(data_dir=tmp_path, max_upload_bytes=32 * MiB, validation_cpu_seconds=2)
+    """Stopped by its 2 s of CPU, not by the wall limit (a different message), which is set
+    far enough off for a busy machine: only a hang guard."""
+    settings = Settings(
+        data_dir=tmp_path,
+        max_upload_bytes=32 * MiB,
+        validation_cpu_seconds=2,
+        validation_wall_seconds=60.0,
+    )
     validator = UploadValidator(settings)
 
     async def judge(data: bytes) -> ValidationReport:
         async with validator.slot():
             return await validator.validate(data)
 
-    start = time.monotonic()
     report = asyncio.run(judge(matmul_chain(200, hidden=True)))
     (problem,) = report.problems
     assert "too much CPU" in problem.message and "2 s of CPU time" in problem.expected
-    assert time.monotonic() - start < 10
 
 
 def _validation_children() -> list[int]:
@@ -121,16 +125,21 @@ def _validation_children() -> list[int]:
     return found
 
 
-def test_a_flood_waits_or_gets_503_and_healthz_stays_fast(league: League) -> None:
+def test_a_flood_waits_or_gets_503_and_healthz_answers_meanwhile(league: League) -> None:
     files = [wide_mlp(128, seed=300 + i) for i in range(8)]
-    worst, stop = [0.0], threading.Event()
+    statuses: list[int] = []  # every /healthz answer (0: none)
+    midflood, stop = [0], threading.Event()  # 200s asked and answered while children ran
 
     def probe() -> None:
-        with httpx.Client(base_url=league.url, timeout=30) as client:
+        with httpx.Client(base_url=league.url, timeout=HANG_GUARD_S) as client:
             while not stop.is_set():
-                start = time.monotonic()
-                assert client.get("/healthz").status_code == 200
-                worst[0] = max(worst[0], time.monotonic() - start)
+                validating = bool(_validation_children())
+                try:
+                    status = client.get("/healthz").status_code
+                except httpx.HTTPError:
+                    status = 0
+                statuses.append(status)
+                midflood[0] += validating and status == 200 and not stop.is_set()
                 time.sleep(0.02)
 
     prober = threading.Thread(target=probe)
@@ -142,7 +151,7 @@ def test_a_flood_waits_or_gets_503_and_healthz_stays_fast(league: League) -> Non
     assert set(codes) == {201, 503} and codes.count(201) >= 2, codes
     busy = [r for r in answers if r.status_code == 503]
     assert all(r.headers["Retry-After"].isdigit() and "busy" in r.text for r in busy)
-    assert worst[0] < 1.0
+    assert set(statuses) == {200} and midflood[0] >= 1, (statuses, midflood)
     assert _validation_children() == []
 
 

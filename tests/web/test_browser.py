@@ -64,7 +64,7 @@ def test_leaderboard_renders_the_api_rows_and_updates_itself(
     page.wait_for_function(
         "() => Array.from(document.querySelectorAll('#leaderboard tbody tr'))"
         ".some(r => r.cells[1] && r.cells[1].textContent === 'carol')",
-        timeout=10_000,
+        timeout=40_000,  # a hang guard: 10 times the page's 4 s poll (POLL_MS)
     )
     assert [r[1] for r in board_rows(page)] == ["alice", "bob", "carol"]
     if screenshot_dir is not None:
