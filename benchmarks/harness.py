@@ -79,14 +79,8 @@ class LeagueServer:
 
 def rss_kib(pid: int) -> int:
     """Resident memory of process ``pid`` in KiB, from ``/proc`` (0 once it is gone)."""
-    try:
-        with open(f"/proc/{pid}/status") as handle:
-            for line in handle:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1])
-    except OSError:
-        pass
-    return 0
+    resident = _proc_field(f"/proc/{pid}/status", "VmRSS")  # "123456 kB"
+    return int(resident.split()[0]) if resident else 0
 
 
 def free_port() -> int:
