@@ -26,30 +26,32 @@ and four driven wheels
   each other with a 0.08 m box).
 * Two steering knuckles (revolute about the vertical, no collision shape, 0.1 kg) carry
   the front wheels; the rear wheels hang directly on the chassis.
-* Wheels are **spheres** of ``wheel_radius``, ``wheel_mass`` 0.3 kg each, on revolute
-  joints about the car's lateral axis. A sphere touches a flat floor at one point
-  whatever its spin, so it rolls like a cylinder here, is the cheapest contact Bullet has
-  and stays correct at a coarse step. Wheels and knuckles are heavier than a real car's
-  (6.4 kg in all) because light links next to the 5 kg chassis make the 10-iteration
-  solver converge poorly (speed wobble in turns, drift on straights).
+* Wheels are **spheres** of ``rolling_radius``, ``wheel_mass`` 0.34 kg each (simapp's
+  masses: 6.56 kg in all), on revolute joints about the car's lateral axis. A sphere
+  touches a flat floor at one point whatever its spin, so it rolls like a cylinder here,
+  is the cheapest contact Bullet has and stays correct at a coarse step.
 * Collision filtering: wheels touch only the ground; the chassis touches everything
   (ground, other cars, obstacle boxes, bodies added with default filters). A car's own
   links never collide with each other. Ray tests (lidar) never hit wheels; with
   ``collisionFilterMask=SOLID_MASK`` they skip the ground too. A ray that starts inside a
   chassis box leaves it without a hit, so a car's lidar does not see its own body.
 
-Drivetrain and steering
------------------------
+Drivetrain and steering (DeepRacer's, from deepracer-simapp; sources in ``arena.car_spec``)
+-----------------------------------------------------------------------------------------
 * Friction: ``wheel_friction`` 0.5 on the wheels, 1.0 on the ground; Bullet multiplies
   the two, so the tyre/road coefficient is the rules' 0.5 (at most 4.9 m/s^2).
-* ``apply_command`` clips steering to +/-30 deg and speed to [0.1, 4.0] m/s. The front
-  knuckles get Ackermann targets (the inner wheel steers more), reached by position
-  motors of ``steering_torque``. Each wheel is a velocity motor of at most
-  ``wheel_torque`` (0.15 N m: 17 N for the car, about 2.7 m/s^2, 0 -> 3.6 m/s in 1.4 s;
-  more torque spins the wheels and the car yaws off line) whose target spin is that
-  wheel's own speed about the turning centre over the radius (an electronic
-  differential: no wheel fights the others in a turn), scaled so that the rear-axle
-  centre moves at the commanded speed.
+* ``apply_command`` clips steering to +/-30 deg and speed to [0.1, 4.0] m/s, as simapp
+  does. Every wheel is a velocity motor of ``wheel_torque`` (10 N m) whose target spin is
+  the same on all four: speed / ``wheel_radius`` (0.035 m), clipped to ``max_wheel_spin``
+  (100 rad/s). The spheres roll at ``rolling_radius`` (0.036 m), so a command of v
+  drives about 1.03 v and every command from 3.5 m/s up drives the top speed, 3.6 m/s.
+  The torque is far above what the tyres can pass to the road: drive and braking are
+  grip-limited, about 0.5 g both ways. There is no differential: in a bend the four
+  wheels spin alike and scrub, as simapp's do.
+* Both front knuckles get the commanded angle (no Ackermann) through position motors of
+  ``steering_torque`` whose gain closes ``physics step / steering_time_constant`` of the
+  gap each physics step: a first-order lag of 0.5 s, simapp's position PID (p 1.0,
+  d 0.5) on its near-massless hinge.
 * ``stop`` zeroes every velocity and sets the wheel motors to hold zero spin, so a frozen
   car stays put while physics runs on, until its next ``apply_command``.
 """
@@ -74,7 +76,6 @@ ALL_GROUPS = -1
 # chassis, boxes and other solid bodies, not the ground or the wheels.
 SOLID_MASK = ALL_GROUPS ^ GROUND_GROUP ^ WHEEL_GROUP
 
-_KNUCKLE_MASS = 0.1
 _KNUCKLE_INERTIA = 1e-5
 _CHASSIS_CLEARANCE = 0.02
 _COM_HEIGHT = 0.06
@@ -148,6 +149,9 @@ class Car:
         self._snapshot_points = np.vstack(
             [[spec.model_point_ahead - self._com_ahead, 0.0], self._wheel_offsets]
         )
+        # Bullet's position motor closes this share of the gap each physics step.
+        step = p.getPhysicsEngineParameters(physicsClientId=client)["fixedTimeStep"]
+        self._steering_gain = min(1.0, step / spec.steering_time_constant)
         self.body_id = self._build(color)
         self.teleport(x, y, yaw)
 
@@ -166,17 +170,19 @@ class Car:
             rgbaColor=color,
             physicsClientId=c,
         )
-        wheel_col = p.createCollisionShape(p.GEOM_SPHERE, radius=s.wheel_radius, physicsClientId=c)
-        wheel_vis = p.createVisualShape(
-            p.GEOM_SPHERE, radius=s.wheel_radius, rgbaColor=_WHEEL_COLOR, physicsClientId=c
+        wheel_col = p.createCollisionShape(
+            p.GEOM_SPHERE, radius=s.rolling_radius, physicsClientId=c
         )
-        axle_z = s.wheel_radius - _COM_HEIGHT
+        wheel_vis = p.createVisualShape(
+            p.GEOM_SPHERE, radius=s.rolling_radius, rgbaColor=_WHEEL_COLOR, physicsClientId=c
+        )
+        axle_z = s.rolling_radius - _COM_HEIGHT
         half_wb, half_tr = s.wheelbase / 2.0, s.track / 2.0
         front_left, front_right = [half_wb, half_tr, axle_z], [half_wb, -half_tr, axle_z]
         rear_left, rear_right = [-half_wb, half_tr, axle_z], [-half_wb, -half_tr, axle_z]
         origin = [0.0, 0.0, 0.0]
         # Knuckle, wheel on knuckle (x2), then rear wheels on the chassis.
-        masses = [_KNUCKLE_MASS, s.wheel_mass] * 2 + [s.wheel_mass] * 2
+        masses = [s.knuckle_mass, s.wheel_mass] * 2 + [s.wheel_mass] * 2
         cols = [-1, wheel_col, -1, wheel_col, wheel_col, wheel_col]
         vis = [-1, wheel_vis, -1, wheel_vis, wheel_vis, wheel_vis]
         positions = [front_left, origin, front_right, origin, rear_left, rear_right]
@@ -223,36 +229,24 @@ class Car:
         """Set steering (deg, positive = left) and target speed (m/s), clipped to limits."""
         s = self.spec
         steer = math.radians(min(max(float(steering_deg), -s.max_steering_deg), s.max_steering_deg))
-        speed = min(max(float(speed), s.min_speed), s.max_speed)
-        if abs(steer) < 1e-6:
-            left = right = 0.0
-            spins = [speed / s.wheel_radius] * 4
-        else:
-            radius = s.wheelbase / math.tan(steer)  # signed: positive turns left
-            r_left, r_right = radius - s.track / 2.0, radius + s.track / 2.0
-            left = math.atan(s.wheelbase / r_left)
-            right = math.atan(s.wheelbase / r_right)
-            scale = speed / (abs(radius) * s.wheel_radius)
-            front = [math.hypot(s.wheelbase, r) for r in (r_left, r_right)]
-            spins = [scale * d for d in (*front, abs(r_left), abs(r_right))]
-        self._set_motors((left, right), spins)
+        self._set_motors(steer, s.wheel_spin(speed))
 
-    def _set_motors(self, steer: tuple[float, float], spins: list[float]) -> None:
+    def _set_motors(self, steer: float, spin: float) -> None:
         s, c = self.spec, self.client
         p.setJointMotorControlArray(
             self.body_id,
             _STEER_JOINTS,
             p.POSITION_CONTROL,
-            targetPositions=list(steer),
+            targetPositions=[steer, steer],
             forces=[s.steering_torque] * 2,
-            positionGains=[s.steering_gain] * 2,
+            positionGains=[self._steering_gain] * 2,
             physicsClientId=c,
         )
         p.setJointMotorControlArray(
             self.body_id,
             _WHEEL_JOINTS,
             p.VELOCITY_CONTROL,
-            targetVelocities=spins,
+            targetVelocities=[spin] * 4,
             forces=[s.wheel_torque] * 4,
             physicsClientId=c,
         )
@@ -330,12 +324,18 @@ class Car:
         """Zero all velocities in place and hold the wheels still (steering unchanged)."""
         c = self.client
         p.resetBaseVelocity(self.body_id, [0.0, 0.0, 0.0], [0.0, 0.0, 0.0], physicsClientId=c)
-        for joint, angle in zip(_STEER_JOINTS, self._steer_angles(), strict=True):
+        angle = self._steer_angle()
+        for joint in _STEER_JOINTS:
             p.resetJointState(self.body_id, joint, angle, 0.0, physicsClientId=c)
         for joint in _WHEEL_JOINTS:
             p.resetJointState(self.body_id, joint, 0.0, 0.0, physicsClientId=c)
-        self._set_motors(self._steer_angles(), [0.0] * 4)
+        self._set_motors(self._steer_angle(), 0.0)
 
-    def _steer_angles(self) -> tuple[float, float]:
+    def _steer_angle(self) -> float:
+        """The knuckles' angle (rad): both are driven to the same target."""
         states = p.getJointStates(self.body_id, _STEER_JOINTS, physicsClientId=self.client)
-        return states[0][0], states[1][0]
+        return 0.5 * (states[0][0] + states[1][0])
+
+    def steering_angle_deg(self) -> float:
+        """The front wheels' steering angle now (deg, positive = left), lagging the command."""
+        return math.degrees(self._steer_angle())

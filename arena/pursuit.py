@@ -1,10 +1,11 @@
 """Pure pursuit on the racing line: the scripted drivers that race without learning.
 
 The car steers, from its rear axle, towards the point ``lookahead`` metres ahead along
-the track's minimum-curvature racing line, and asks for the speed profile's speed there
-(the lowest on the way, so it never speeds up before a bend is over), capped by the
-action space and by the grip on the arc it is steering. It reads DeepRacer's params (not
-the sensors), so it races with any sensors.
+the track's minimum-curvature racing line, ahead of its lagging steering (see
+:meth:`PurePursuitPolicy.act`), and asks for the speed profile's speed where it is,
+capped by the action space and by what the car holds on the arc it is steering. It plans
+with its car's measured limits (:func:`car_limits`) and reads DeepRacer's params (not the
+sensors), so it races with any sensors.
 
 :class:`PurePursuitPolicy` is the baseline driver and the league's bot (the car that fills
 a head-to-model grid); :class:`PassingPursuitPolicy` also steers around boxes and cars,
@@ -14,39 +15,32 @@ and is the teacher that imitation learning copies.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.car_spec import DEFAULT_CAR, CarSpec
-from arena.config import PhysicsConfig
-from arena.drivers import nearest_action, pursuit_steering
-from tracks.raceline import CarLimits, RacingLine, compute_racing_line, profile_path
+from arena.drivers import SteeringLead, nearest_action, pursuit_steering
+from tracks.raceline import CarLimits, RacingLine, compute_racing_line
 from tracks.track import Track
 
 
 def car_limits(car: CarSpec = DEFAULT_CAR) -> CarLimits:
-    """The racing-line limits of ``car``: its top speed and width.
+    """The racing-line limits of ``car``, measured by driving it (:mod:`arena.calibration`).
 
-    Grip, acceleration and braking keep :class:`CarLimits`' defaults (figures for the
-    line's speed profile, not settings of the simulated car).
+    The default car's are :class:`CarLimits`' defaults (its measurement, checked by
+    ``tests/arena/test_calibration.py``), so that no process pays for a calibration to
+    drive it; any other car is calibrated once per process.
     """
-    return CarLimits(max_speed=car.max_speed, car_width=car.width)
+    if car == DEFAULT_CAR:
+        return CarLimits()
+    from arena.calibration import calibrate
+
+    return calibrate(car).limits(car)
 
 
 DEFAULT_LIMITS = car_limits()
-
-# Speeds: the line's profile is planned with PROFILE_GRIP times the car's lateral grip,
-# and the speed on the arc the car is steering is held to ARC_GRIP times it
-# (v^2 * tan(steer) / wheelbase). The pursuit car rounds the line's bends on a gentler arc
-# than the line's own, so a profile planned at the car's grip brakes it more than the arc
-# needs; the arc cap is what keeps it on the road, on the line or off it (passing,
-# rejoining). The two together lap faster and cleaner than the profile at the car's grip
-# with no arc cap (benchmarks/RESULTS.md, "The arc cap and wider box clearance").
-PROFILE_GRIP = 1.4
-ARC_GRIP = 1.0
 
 _LINES: dict[tuple[Any, ...], RacingLine] = {}
 
@@ -77,19 +71,16 @@ class PurePursuitPolicy:
         track: Track,
         action_space: DiscreteActionSpace | ContinuousActionSpace,
         limits: CarLimits = DEFAULT_LIMITS,
-        lookahead: float = 0.5,
-        lookahead_per_speed: float = 0.2,
+        lookahead: float = 0.7,
+        lookahead_per_speed: float = 0.25,
     ) -> None:
         if lookahead <= 0 or lookahead_per_speed < 0:
             raise ValueError("lookahead must be positive and lookahead_per_speed not negative")
         self.space = action_space
         self.line = racing_line_for(track, limits)
-        planning = replace(limits, max_lateral_accel=PROFILE_GRIP * limits.max_lateral_accel)
-        # The same line, its speed profile planned with more grip.
-        self.planned_speed = profile_path(
-            self.line.points, planning, is_loop=self.line.is_loop
-        ).speed
-        self.arc_grip = ARC_GRIP * limits.max_lateral_accel
+        self.limits = limits
+        self.lock = limits.max_steering_deg
+        self.lead = SteeringLead(limits.steering_time_constant, limits.max_steering_deg)
         self.lookahead = lookahead
         self.lookahead_per_speed = lookahead_per_speed
         self.max_speed = action_space.max_speed
@@ -98,10 +89,12 @@ class PurePursuitPolicy:
     def reset(self) -> None:
         """Forget the steering carried over between steps (start of a race)."""
         self._carry = 0.0
+        self.lead.reset()
 
     def act(self, observation: Any, params: dict[str, Any] | None = None) -> Any:
         """The action towards the racing-line point ahead, at its profile speed.
 
+        The steering lags its command, so the driver leads it (:class:`SteeringLead`).
         In a discrete space the speed is rounded down to one the space offers, and the
         steering its few angles miss is carried into the next step (error diffusion), so
         that over a few steps the chosen angles average out to the wanted one.
@@ -109,13 +102,17 @@ class PurePursuitPolicy:
         if params is None:
             raise ValueError(f"{type(self).__name__} needs the race params")
         steer, speed = self.command_for(params)
+        lead = self.lead.command(steer)
         if not isinstance(self.space, DiscreteActionSpace):
-            return nearest_action(self.space, steer, speed)
-        wanted = steer + self._carry
-        action = nearest_action(self.space, wanted, self._speed_at_most(speed))
-        chosen = self.space.actions[action].steering_angle
-        lock = DEFAULT_CAR.max_steering_deg
-        self._carry = float(np.clip(wanted - chosen, -lock, lock))
+            steering = self.space.steering_angle
+            chosen = float(np.clip(lead, steering.low, steering.high))
+            action = nearest_action(self.space, chosen, speed)
+        else:
+            wanted = lead + self._carry
+            action = nearest_action(self.space, wanted, self._speed_at_most(speed))
+            chosen = self.space.actions[action].steering_angle
+            self._carry = float(np.clip(wanted - chosen, -self.lock, self.lock))
+        self.lead.sent(chosen)
         return action
 
     def _speed_at_most(self, speed: float) -> float:
@@ -132,13 +129,14 @@ class PurePursuitPolicy:
         """``(steering_deg, speed)`` for a car whose model point is at ``(x, y)``."""
         yaw, rear, distance = self._pursuit_geometry(x, y, heading_deg, speed)
         target, target_speed = self._ahead(rear, distance)
-        steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target)
-        return steer, float(min(target_speed, self.max_speed, self.arc_speed(steer)))
+        wheelbase = self.limits.wheelbase_at(speed)
+        steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
+        return steer, float(min(target_speed, self.max_speed, self.arc_speed(steer, speed)))
 
-    def arc_speed(self, steer_deg: float) -> float:
-        """The highest speed the car's grip allows on the arc that ``steer_deg`` steers."""
-        bend = math.tan(math.radians(abs(steer_deg))) / DEFAULT_CAR.wheelbase
-        return math.sqrt(self.arc_grip / bend) if bend > 1e-9 else math.inf
+    def arc_speed(self, steer_deg: float, speed: float) -> float:
+        """The highest speed the car holds on the arc that ``steer_deg`` steers at ``speed``."""
+        bend = math.tan(math.radians(abs(steer_deg))) / self.limits.wheelbase_at(speed)
+        return float(self.limits.corner_speed(bend)) if bend > 1e-9 else math.inf
 
     def _pursuit_geometry(
         self, x: float, y: float, heading_deg: float, speed: float
@@ -149,18 +147,27 @@ class PurePursuitPolicy:
         return yaw, rear, self.lookahead + self.lookahead_per_speed * max(speed, 0.0)
 
     def _ahead(self, point: np.ndarray, distance: float) -> tuple[np.ndarray, float]:
-        """The racing-line point ``distance`` metres past the line point nearest ``point``."""
+        """The racing-line point ``distance`` metres past the line point nearest ``point``
+        (the rear axle), and the profile's lowest speed between there and the front axle.
+
+        The drivetrain brakes and accelerates at the rates the profile plans with, so the
+        profile's speed where the car is, is the one to ask for.
+        """
         line = self.line
         nearest = int(np.argmin(np.sum((line.points - point) ** 2, axis=1)))
-        s = line.arc_length[nearest] + distance
-        s = s % line.length if line.is_loop else min(s, line.length)
+        here = line.arc_length[nearest]
+        s, front = here + distance, here + DEFAULT_CAR.wheelbase
+        if line.is_loop:
+            s, front = s % line.length, front % line.length
+        else:
+            s, front = min(s, line.length), min(front, line.length)
         x = np.interp(s, line.arc_length, line.points[:, 0])
         y = np.interp(s, line.arc_length, line.points[:, 1])
-        return np.array([x, y]), self._slowest(nearest, s)
+        return np.array([x, y]), self._slowest(nearest, front)
 
     def _slowest(self, start: int, s_end: float) -> float:
-        """The lowest planned speed from line point ``start`` to arc length ``s_end``."""
-        arc, speed = self.line.arc_length, self.planned_speed
+        """The lowest profile speed from line point ``start`` to arc length ``s_end``."""
+        arc, speed = self.line.arc_length, self.line.speed
         end_speed = float(np.interp(s_end, arc, speed))
         end = int(np.searchsorted(arc, s_end))
         window = speed[start:end] if end >= start else np.r_[speed[start:], speed[:end]]
@@ -169,23 +176,25 @@ class PurePursuitPolicy:
 
 # Passing (PassingPursuitPolicy): objects this far ahead are planned around, the larger of
 # a distance and a time at the car's speed; one still this far beside or behind the car
-# (centre to centre) is not yet passed.
-PASS_HORIZON_M = 1.5
-PASS_HORIZON_S = 0.8
+# (centre to centre) is not yet passed. The steering lags its command by 0.5 s, so the
+# car plans a pass 2 s ahead (0.8 s on a car that steered at once hit a box in every race).
+PASS_HORIZON_M = 2.5
+PASS_HORIZON_S = 2.0
 PASS_BESIDE_M = 0.45
 # Centre-to-centre lateral distance kept from an object: half its width (a box 0.25 m, a
 # car 0.1 m; the params do not say which, so an object moving faster than MOVING_MPS is
 # taken for a car), half the car's (0.1 m) and a margin; and the margin kept from the
-# track's edge. (0.5 m rather than 0.45 m from a box hits fewer boxes in noisy races: the
-# same section of benchmarks/RESULTS.md.)
-BOX_CLEARANCE_M = 0.5
-CAR_CLEARANCE_M = 0.32
+# track's edge. (0.6 m from a box: the lagging steering swings wider than it aims;
+# benchmarks/RESULTS.md, "The car beside DeepRacer's".)
+BOX_CLEARANCE_M = 0.6
+CAR_CLEARANCE_M = 0.4
 MOVING_MPS = 0.1
 PASS_EDGE_MARGIN_M = 0.06
 # The highest speed asked for while steering around an object (a tighter, steadier line).
-PASS_SPEED = 3.0
-# Off the racing line by more than this (after a pass), the car rejoins it at PASS_SPEED.
-REJOIN_M = 0.15
+PASS_SPEED = 2.0
+# Off the racing line by more than this (after a pass), the car rejoins it at PASS_SPEED
+# (the lagging steering strays up to about 0.2 m from the line with nothing to pass).
+REJOIN_M = 0.25
 # A car ahead is passed on the far side only when it is at least this far ahead (else the
 # pass would cut across its nose): closer, the car follows it on its own side.
 CROSS_GAP_M = 1.5
@@ -195,8 +204,9 @@ FOLLOW_MIN_SPEED = 0.5  # DeepRacer's lowest speed
 # pass at PASS_SPEED would lose more than it could gain, so the car follows it on the
 # racing line instead, closing to FOLLOW_GAP_M (centre to centre along the track) at
 # FOLLOW_GAIN m/s per metre of gap error, and never faster than lets it brake at the car's
-# braking limit, after FOLLOW_REACTION_S, to the leader's speed before the gap falls to
-# FOLLOW_MIN_GAP_M (the car's length and a few centimetres; Gipps' car-following rule).
+# braking limit, after FOLLOW_REACTION_S (three control steps: with one, the follower
+# ran into the leader once a race on the lagging car), to the leader's speed before the
+# gap falls to FOLLOW_MIN_GAP_M (the car's length and a few centimetres; Gipps' rule).
 # Head-to-head laps are timed from each car's own grid slot, so a car that ends the race
 # closer behind than it started wins: following a racing car wins more races than passing
 # it, and the braking cap keeps the follower off a leader that brakes hard
@@ -205,7 +215,7 @@ FOLLOW_ABOVE_MPS = 1.2
 FOLLOW_GAP_M = 0.55
 FOLLOW_GAIN = 3.0
 FOLLOW_MIN_GAP_M = 0.35
-FOLLOW_REACTION_S = 1.0 / PhysicsConfig().control_hz  # one control step (DeepRacer's 15 Hz)
+FOLLOW_REACTION_S = 0.2
 
 
 class PassingPursuitPolicy(PurePursuitPolicy):
@@ -247,8 +257,9 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         )
         arc = float(self.track.project(rear[None]).arc_length[0]) + distance
         target, _ = self.track.pose_at(self.track.wrap_arc_length(arc), offset)
-        steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target)
-        return steer, min(speed, most, self.arc_speed(steer))
+        wheelbase = self.limits.wheelbase_at(params["speed"])
+        steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
+        return steer, min(speed, most, self.arc_speed(steer, params["speed"]))
 
     def _way_past(self, params: dict[str, Any]) -> tuple[float | None, float] | None:
         """``(lateral offset to aim at, m left positive; speed cap)`` past the nearest

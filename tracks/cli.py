@@ -147,7 +147,7 @@ def raceline_command(
     direction: DirectionOption = None,
     as_json: JsonOption = False,
 ) -> None:
-    """Compute the racing line and the physical-limit lap time."""
+    """Compute the racing line and the physical-limit lap time of DeepRacer's car."""
     from tracks.raceline import CarLimits, centerline_profile, compute_racing_line
 
     track = _load(name, direction)
@@ -179,4 +179,12 @@ def raceline_command(
     console.print(
         f"  racing line {line.length:.2f} m, speeds {doc['min_speed']}-{doc['top_speed']} m/s"
     )
-    console.print("  car limits: " + ", ".join(f"{k}={v:g}" for k, v in asdict(limits).items()))
+    figures = {k: v for k, v in asdict(limits).items() if k != "cornering"}
+    console.print("  car limits: " + ", ".join(f"{k}={v:g}" for k, v in figures.items()))
+    console.print(
+        f"  cornering envelope: {len(limits.cornering)} circles, from "
+        f"{limits.cornering[0][1]:g} m/s at curvature {limits.cornering[0][0]:g}/m to "
+        f"{limits.cornering[-1][1]:g} m/s at {limits.cornering[-1][0]:g}/m"
+        if limits.cornering
+        else "  cornering: grip alone"
+    )

@@ -22,35 +22,108 @@ from tracks.track import Track
 GRAVITY = 9.81
 STEP = 0.15
 """Default spacing of the optimised points, metres (about half a DeepRacer waypoint gap)."""
-CURVATURE_WINDOW = 0.5
+CURVATURE_WINDOW = 1.0
 """Metres over which curvature is averaged: finer kinks (polyline borders) are artefacts."""
 
 
 @dataclass(frozen=True)
 class CarLimits:
-    """What the 1/18 car can do (SI units).
+    """What the 1/18 car can do (SI units), as ``arena.calibration`` measures it by driving it.
 
-    ``max_lateral_accel`` defaults to 0.5 g: the wheels' friction coefficient of about
-    0.5 from the racing rules. ``max_accel`` (3 m/s^2) is the drivetrain's, below grip;
-    ``max_brake`` (4 m/s^2) stays just under the 0.5 g friction limit.
+    ``max_speed`` is the speed the car settles at on full command; ``max_accel`` and
+    ``max_brake`` the constant rates that cover the same distance as its launch and its
+    braking; ``max_lateral_accel`` the highest lateral acceleration it holds on a steady
+    circle. ``cornering`` is the measured envelope of steady circles, ``(curvature 1/m,
+    speed m/s)`` rows by rising curvature: the fastest circle the car holds at least that
+    tight. It caps the speed where grip alone does not: on tight circles, where the
+    steering's lock and the scrub of the wheels (no differential) leave the car short of
+    its grip. Empty, grip alone decides. The steering's effective wheelbase, that of a car
+    without scrub that would steer the same circles (``tan(steer) / curvature``), grows
+    with speed: ``turning_wheelbase + understeer_gradient * v^2``
+    (:meth:`wheelbase_at`). ``steering_time_constant`` is the lag of the steering (a
+    first-order response) and ``max_steering_deg`` its lock: these three are what a
+    driver of the car needs to know; the racing line does not use them.
 
-    The simulated car is ``arena.car_spec.CarSpec``, which this layer cannot import:
-    ``arena.pursuit.car_limits`` builds the limits of a race's car from it (top speed,
-    width). These defaults serve ``tracks`` used on its own (``slipstream tracks``) and
-    equal that car's limits, which ``tests/arena/test_pursuit.py`` checks.
+    This layer cannot import the arena: these defaults are DeepRacer's car's (the arena's
+    ``DEFAULT_CAR``) as measured, so that ``tracks`` used on its own (``slipstream
+    tracks raceline``) plans with them; ``tests/arena/test_calibration.py`` fails when
+    the car changes and they no longer match its measurement.
     """
 
-    max_speed: float = 4.0
-    max_lateral_accel: float = 0.5 * GRAVITY
-    max_accel: float = 3.0
-    max_brake: float = 4.0
+    max_speed: float = 3.599
+    max_lateral_accel: float = 3.363
+    max_accel: float = 4.814
+    max_brake: float = 4.85
+    cornering: tuple[tuple[float, float], ...] = (
+        (0.266, 3.556),
+        (0.28, 3.448),
+        (0.297, 3.34),
+        (0.311, 3.232),
+        (0.328, 3.126),
+        (0.351, 3.02),
+        (0.379, 2.914),
+        (0.409, 2.808),
+        (0.441, 2.705),
+        (0.476, 2.603),
+        (0.511, 2.5),
+        (0.548, 2.398),
+        (0.591, 2.293),
+        (0.638, 2.188),
+        (0.689, 2.08),
+        (0.748, 1.975),
+        (0.837, 1.828),
+        (0.937, 1.723),
+        (1.061, 1.62),
+        (1.215, 1.512),
+        (1.38, 1.403),
+        (1.557, 1.295),
+        (1.75, 1.188),
+        (1.948, 1.084),
+        (2.126, 0.984),
+        (2.224, 0.897),
+        (2.314, 0.661),
+        (2.404, 0.565),
+    )
+    turning_wheelbase: float = 0.208
+    understeer_gradient: float = 0.0273
+    steering_time_constant: float = 0.5
+    max_steering_deg: float = 30.0
     car_width: float = 0.196
     safety_margin: float = 0.05
 
+    _ENVELOPE_ERROR = (
+        "CarLimits.cornering must be (curvature, speed) rows of positive numbers "
+        "by rising curvature"
+    )
+
     def __post_init__(self) -> None:
         for key, value in asdict(self).items():
-            if not np.isfinite(value) or value < 0 or (value == 0 and key != "safety_margin"):
+            if key == "cornering":
+                continue
+            may_be_zero = key in ("safety_margin", "understeer_gradient")
+            if not np.isfinite(value) or value < 0 or (value == 0 and not may_be_zero):
                 raise ValueError(f"CarLimits.{key} must be a positive number, got {value!r}")
+        rows = np.asarray(self.cornering, dtype=float)
+        shaped = rows.size == 0 or (rows.ndim == 2 and rows.shape[1] == 2)
+        if not shaped or not np.isfinite(rows).all() or (rows <= 0).any():
+            raise ValueError(self._ENVELOPE_ERROR)
+        if rows.size and (np.diff(rows[:, 0]) <= 0).any():
+            raise ValueError(self._ENVELOPE_ERROR)
+
+    def corner_speed(self, curvature: np.ndarray | float) -> np.ndarray:
+        """The highest speed the car holds on a circle of ``curvature`` (1/m): grip, the
+        cornering envelope (beyond its tightest circle, that circle's speed) and top speed."""
+        bend = np.abs(np.asarray(curvature, dtype=float))
+        with np.errstate(divide="ignore"):
+            speed = np.minimum(np.sqrt(self.max_lateral_accel / bend), self.max_speed)
+        if self.cornering:
+            rows = np.asarray(self.cornering, dtype=float)
+            speed = np.minimum(speed, np.interp(bend, rows[:, 0], rows[:, 1], left=np.inf))
+        return speed
+
+    def wheelbase_at(self, speed: float) -> float:
+        """The steering's effective wheelbase (m) at ``speed`` m/s: ``tan(steer) / curvature``."""
+        return self.turning_wheelbase + self.understeer_gradient * speed**2
 
     @property
     def clearance(self) -> float:
@@ -286,12 +359,6 @@ def _ordered(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 # ------------------------------------------------------------------ speed profile
-def _grip_speeds(curvature: np.ndarray, limits: CarLimits) -> np.ndarray:
-    with np.errstate(divide="ignore"):
-        grip = np.sqrt(limits.max_lateral_accel / np.abs(curvature))
-    return np.minimum(grip, limits.max_speed)
-
-
 def _passes(cap: np.ndarray, ds: np.ndarray, limits: CarLimits, v_start: float) -> np.ndarray:
     """Forward (acceleration) then backward (braking) pass along an open sequence."""
     v = cap.copy()
@@ -313,9 +380,9 @@ def speed_profile(
     starts from standstill.
     """
     curvature = _path_curvature(points, is_loop, CURVATURE_WINDOW)
-    cap = _grip_speeds(curvature, limits)
     ring = np.vstack([points, points[:1]]) if is_loop else points
     ds = np.linalg.norm(np.diff(ring, axis=0), axis=1)
+    cap = limits.corner_speed(curvature)
     if is_loop:
         start = int(np.argmin(cap))
         order = np.r_[start : len(cap), 0 : start + 1]

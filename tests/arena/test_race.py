@@ -17,11 +17,11 @@ TRACK = "slipstream_speedway"
 
 
 def test_cars_that_did_not_finish_are_placed_by_laps_then_distance() -> None:
-    """Three laps in 12 s: nobody finishes. ``sprinter`` (2 m/s, inner lane, front slot)
+    """Three laps in 12 s: nobody finishes. ``sprinter`` (1.8 m/s, inner lane, front slot)
     laps ``crawler`` (0.5 m/s) and ``straggler`` (0.15 m/s), which both keep to the outer
     lane, so nobody touches: one lap beats none, and between no laps the longer way
     driven comes first (names sort the other way round: ``crawler`` < ``sprinter``)."""
-    plan = {"sprinter": (2.0, "inner"), "crawler": (0.5, "outer"), "straggler": (0.15, "outer")}
+    plan = {"sprinter": (1.8, "inner"), "crawler": (0.5, "outer"), "straggler": (0.15, "outer")}
     space = continuous_action_space(speed_low=0.1, speed_high=2.0)
     config = RaceConfig.build(
         track="beginner_loop",

@@ -29,11 +29,43 @@ def lines():
     return {case: compute_racing_line(get_track(*case)) for case in CASES}
 
 
-def test_defaults_match_the_one_eighteenth_car():
-    assert LIMITS.max_speed == 4.0
+def test_defaults_describe_the_one_eighteenth_car():
+    """DeepRacer's car as measured (tests/arena/test_calibration.py keeps them so): its
+    wheels' 100 rad/s on a 0.036 m radius, grip-limited drive and braking near 0.5 g,
+    cornering under it (the wheels scrub), slower the tighter the circle."""
+    assert LIMITS.max_speed == pytest.approx(100 * 0.036, rel=0.01)
+    assert LIMITS.max_accel == pytest.approx(0.5 * 9.81, rel=0.05)
+    assert LIMITS.max_brake == pytest.approx(0.5 * 9.81, rel=0.05)
+    assert LIMITS.max_lateral_accel < 0.5 * 9.81
+    rows = np.array(LIMITS.cornering)
+    assert np.all(np.diff(rows[:, 0]) > 0) and np.all(np.diff(rows[:, 1]) < 0)
     assert LIMITS.car_width == 0.196
-    assert LIMITS.max_lateral_accel == pytest.approx(0.5 * 9.81)
     assert LIMITS.clearance == pytest.approx(0.098 + LIMITS.safety_margin)
+
+
+def test_corner_speed_is_the_lower_of_grip_and_the_envelope():
+    limits = CarLimits(max_lateral_accel=4.0, cornering=((0.5, 2.0), (1.0, 1.0)))
+    assert limits.corner_speed(0.0) == limits.max_speed
+    assert limits.corner_speed(0.25) == pytest.approx(min(np.sqrt(4.0 / 0.25), 3.599))
+    assert limits.corner_speed(0.75) == pytest.approx(1.5)  # between the rows
+    assert limits.corner_speed(-0.75) == pytest.approx(1.5)  # either way round
+    assert limits.corner_speed(3.0) == pytest.approx(1.0)  # past the tightest: its speed
+    grip_only = CarLimits(max_lateral_accel=4.0, cornering=())
+    assert grip_only.corner_speed(0.75) == pytest.approx(np.sqrt(4.0 / 0.75))
+
+
+@pytest.mark.parametrize(
+    "rows", [((1.0, 2.0), (0.5, 1.0)), ((0.5, 2.0), (0.5, 1.0)), ((0.5, -1.0),), ((0.5,),)]
+)
+def test_limits_reject_a_nonsense_envelope(rows):
+    with pytest.raises(ValueError, match="cornering"):
+        CarLimits(cornering=rows)
+
+
+def test_the_effective_wheelbase_grows_with_speed():
+    limits = CarLimits(turning_wheelbase=0.2, understeer_gradient=0.03)
+    assert limits.wheelbase_at(0.0) == 0.2
+    assert limits.wheelbase_at(2.0) == pytest.approx(0.2 + 0.03 * 4.0)
 
 
 @pytest.mark.parametrize("field", ["max_speed", "max_accel", "car_width"])
@@ -94,7 +126,8 @@ def test_to_dict_is_json(lines):
     doc = json.loads(json.dumps(line.to_dict()))
     assert doc["lap_time"] == pytest.approx(line.lap_time, abs=1e-3)
     assert len(doc["points"]) == len(doc["speed"]) == len(line.points)
-    assert doc["limits"]["max_speed"] == 4.0
+    assert doc["limits"]["max_speed"] == LIMITS.max_speed
+    assert [tuple(row) for row in doc["limits"]["cornering"]] == list(LIMITS.cornering)
     assert "points" not in line.to_dict(include_points=False)
 
 
@@ -126,7 +159,7 @@ def test_ring_is_driven_at_the_grip_limit(radius, width):
     radii = np.linalg.norm(line.points, axis=1)
     assert radii.min() >= radius - width / 2 + LIMITS.clearance - 1e-3
     assert radii.max() <= radius + width / 2 - LIMITS.clearance + 1e-3
-    slowest = min(np.sqrt(LIMITS.max_lateral_accel * radii.min()), LIMITS.max_speed)
+    slowest = float(LIMITS.corner_speed(1.0 / radii.min()))
     assert line.lap_time <= line.length / slowest * 1.01
 
 
