@@ -1,7 +1,8 @@
 """``validate``: the one verdict on a submission, shared by the racer's CLI and the server.
 
-Stages run cheapest first and stop at the first that fails: archive, metadata, graph,
-behaviour. Every failure becomes a :class:`~submissions.format.Problem`; nothing raises.
+Stages run cheapest first and stop at the first that fails: archive (with the bounds of
+``metrics.csv``), metadata, graph, behaviour. Every failure becomes a
+:class:`~submissions.format.Problem`; nothing raises.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from submissions.format import (
     short,
 )
 from submissions.metadata import CheckedMetadata, JsonScalar, OutputSpec, check_metadata
+from submissions.metrics_csv import check_metrics
 from submissions.onnx_checks import check_behaviour, check_graph
 
 DEFAULT_LIMITS = Limits()
@@ -139,6 +141,8 @@ def _validate(source: Source, limits: Limits, run_policy: bool) -> ValidationRep
         return ValidationReport(problems=(data,))
     members, problems = read_archive(data, limits)
     if members is None:
+        return ValidationReport(problems=tuple(problems))
+    if METRICS_MEMBER in members and (problems := check_metrics(members[METRICS_MEMBER], limits)):
         return ValidationReport(problems=tuple(problems))
     policy = members[POLICY_MEMBER]
     checked, problems = check_metadata(members[METADATA_MEMBER], policy, limits)

@@ -1,7 +1,12 @@
 """Finding tracks by name: the built-ins first, then the user's imported tracks.
 
 User tracks live as Slipstream JSON documents in ``$SLIPSTREAM_HOME/tracks``
-(``SLIPSTREAM_HOME`` defaults to ``~/.slipstream``), one ``<name>.json`` each.
+(``SLIPSTREAM_HOME`` defaults to ``~/.slipstream``), one ``<name>.json`` each. A user
+track is read and checked once per version of its file (path, mtime, size), in a bounded
+cache, so a server answering for it does not re-check its geometry on every request.
+
+Errors name the track and the problem, never the server's paths, and an unknown name
+lists the built-in tracks only (the user's own are listed by ``slipstream tracks list``).
 """
 
 from __future__ import annotations
@@ -11,7 +16,7 @@ import os
 import re
 import tempfile
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, lru_cache
 from pathlib import Path
 from typing import Literal
 
@@ -23,6 +28,8 @@ Direction = Literal["ccw", "cw"]
 Source = Literal["builtin", "user"]
 
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+USER_TRACK_CACHE_SIZE = 32
+"""User track file versions whose reading (track or error) is kept in memory."""
 
 
 class TrackNotFoundError(TrackError):
@@ -86,21 +93,51 @@ def _user_files() -> dict[str, Path]:
     }
 
 
-def _available() -> list[str]:
-    return builtin_names() + sorted(_user_files())
+@lru_cache(maxsize=USER_TRACK_CACHE_SIZE)
+def _read_version(path: Path, inode: int, mtime_ns: int, size: int) -> Track | TrackFileError:
+    """One version of a user track file, read and checked (its error kept as well)."""
+    try:
+        return read_document(path)
+    except TrackFileError as exc:
+        return TrackFileError(exc.path, exc.problem)  # without the traceback's frames
+
+
+def _read_user_track(path: Path) -> Track:
+    """The user track in ``path``, from the cache while the file is unchanged."""
+    try:
+        stat = path.stat()
+    except OSError:
+        raise TrackFileError(path, "no such file") from None
+    result = _read_version(path, stat.st_ino, stat.st_mtime_ns, stat.st_size)
+    if isinstance(result, TrackFileError):
+        raise result
+    return result
+
+
+def _unknown(name: str) -> TrackNotFoundError:
+    return TrackNotFoundError(
+        f"unknown track {name!r}; the built-in tracks are {', '.join(builtin_names())}; "
+        "`slipstream tracks list` lists every track, imported ones included"
+    )
 
 
 def get_track(name: str, direction: Direction | None = None) -> Track:
-    """The track called ``name`` (built-in or user), optionally in the given direction."""
+    """The track called ``name`` (built-in or user), optionally in the given direction.
+
+    Raises :class:`TrackNotFoundError` for an unknown name and :class:`TrackError` for a
+    user track whose file is unusable; neither message holds a path or other user tracks.
+    """
     if name in BUILTIN_DESIGNS:
         track = _builtin(name)
     else:
         path = _user_files().get(name)
         if path is None:
-            raise TrackNotFoundError(
-                f"unknown track {name!r}; available: {', '.join(_available())}"
-            )
-        track = read_document(path)
+            raise _unknown(name)
+        try:
+            track = _read_user_track(path)
+        except TrackFileError as exc:
+            problem = exc.problem.replace(str(path.parent), "").replace(path.name, name)
+            raise TrackError(f"the user track {name!r} cannot be used: {problem}") from None
     return track if direction is None else track.with_direction(direction)
 
 
@@ -109,7 +146,7 @@ def list_tracks() -> list[TrackInfo]:
     infos = [TrackInfo.of(_builtin(n), "builtin") for n in builtin_names()]
     for path in _user_files().values():
         with contextlib.suppress(TrackFileError):
-            infos.append(TrackInfo.of(read_document(path), "user"))
+            infos.append(TrackInfo.of(_read_user_track(path), "user"))
     return infos
 
 

@@ -1,7 +1,10 @@
 """Reading and writing track files: DeepRacer ``.npy`` and Slipstream's JSON/YAML.
 
 Every reader either returns a complete, validated :class:`~tracks.track.Track` or
-raises :class:`TrackFileError` with one message naming the file and the problem.
+raises :class:`TrackFileError` with one message naming the file and the problem. Files
+are bounded before they are parsed: at most :data:`MAX_FILE_BYTES` bytes, and a ``.npy``
+header must describe an array that fits in the file and in
+:data:`~tracks.track.MAX_TRACK_POINTS` rows before any array is allocated.
 """
 
 from __future__ import annotations
@@ -14,26 +17,37 @@ from typing import Any
 import numpy as np
 import yaml
 
-from tracks.track import Track, TrackError
+from tracks.track import MAX_TRACK_POINTS, Track, TrackError
 
 FORMAT_NAME = "slipstream-track"
 FORMAT_VERSION = 1
-MAX_FILE_BYTES = 20 * 1024 * 1024
+MAX_FILE_BYTES = 2 * 1024 * 1024
+"""Largest track file read (a 2,000-point track is about 100 KB as .npy, 300 KB as JSON)."""
 SUFFIXES = (".npy", ".json", ".yaml", ".yml")
+_NPY_MAX_HEADER_BYTES = 10_000
 
 
 class TrackFileError(TrackError):
-    """A track file could not be loaded; the message names the file and the problem."""
+    """A track file could not be loaded; the message names the file and the problem.
+
+    ``problem`` is the message without the file's path, for showing to people who
+    should not learn where the file lives (a web client of the league).
+    """
+
+    def __init__(self, path: str | Path, problem: str) -> None:
+        self.path = Path(path)
+        self.problem = problem
+        super().__init__(f"{path}: {problem}")
 
 
 def _check_file(path: Path) -> None:
     if not path.exists():
-        raise TrackFileError(f"{path}: no such file")
+        raise TrackFileError(path, "no such file")
     if not path.is_file():
-        raise TrackFileError(f"{path}: not a file")
+        raise TrackFileError(path, "not a file")
     size = path.stat().st_size
     if size > MAX_FILE_BYTES:
-        raise TrackFileError(f"{path}: {size} bytes is larger than the {MAX_FILE_BYTES} byte limit")
+        raise TrackFileError(path, f"{size} bytes is larger than the {MAX_FILE_BYTES} byte limit")
 
 
 def track_from_deepracer_array(
@@ -55,22 +69,60 @@ def track_to_deepracer_array(track: Track) -> np.ndarray:
     return np.hstack([track.waypoints, track.inner, track.outer])
 
 
+def _npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
+    """Shape, dtype and data offset a ``.npy`` header declares, read without loading data."""
+    with path.open("rb") as handle:
+        version = np.lib.format.read_magic(handle)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(
+                handle, max_header_size=_NPY_MAX_HEADER_BYTES
+            )
+        elif version == (2, 0):
+            shape, _, dtype = np.lib.format.read_array_header_2_0(
+                handle, max_header_size=_NPY_MAX_HEADER_BYTES
+            )
+        else:
+            raise ValueError(f".npy format version {version} is not supported (use 1.0 or 2.0)")
+        return tuple(shape), dtype, handle.tell()
+
+
+def _check_npy_header(path: Path) -> None:
+    """Refuse a header whose array is not plain numbers, too long, or larger than the file."""
+    try:
+        shape, dtype, offset = _npy_header(path)
+    except (ValueError, OSError, EOFError, SyntaxError) as exc:
+        raise TrackFileError(path, f"not a readable .npy file ({exc})") from None
+    if dtype.hasobject:
+        raise TrackFileError(path, "not a plain numeric .npy array (it holds Python objects)")
+    if shape and shape[0] > MAX_TRACK_POINTS + 1:  # + a loop's closing point
+        raise TrackFileError(
+            path, f"the array has {shape[0]} rows; a track may have at most {MAX_TRACK_POINTS}"
+        )
+    needed = math.prod(shape) * dtype.itemsize
+    present = path.stat().st_size - offset
+    if needed > present:
+        raise TrackFileError(
+            path, f"the header declares {shape} {dtype} ({needed} bytes) but {present} follow"
+        )
+
+
 def read_npy(path: str | Path, name: str | None = None) -> Track:
-    """Load a DeepRacer ``.npy`` track file (never unpickles)."""
+    """Load a DeepRacer ``.npy`` track file (never unpickles; header checked before loading)."""
     path = Path(path)
     _check_file(path)
+    _check_npy_header(path)
     try:
         arr = np.load(path, allow_pickle=False)
     except ValueError as exc:
-        raise TrackFileError(f"{path}: not a plain numeric .npy array ({exc})") from None
+        raise TrackFileError(path, f"not a plain numeric .npy array ({exc})") from None
     except (OSError, EOFError) as exc:
-        raise TrackFileError(f"{path}: not a readable .npy file ({exc})") from None
+        raise TrackFileError(path, f"not a readable .npy file ({exc})") from None
     if not isinstance(arr, np.ndarray):
-        raise TrackFileError(f"{path}: not a single numpy array")
+        raise TrackFileError(path, "not a single numpy array")
     try:
         return track_from_deepracer_array(arr, name or path.stem)
     except TrackError as exc:
-        raise TrackFileError(f"{path}: {exc}") from None
+        raise TrackFileError(path, str(exc)) from None
 
 
 def write_npy(track: Track, path: str | Path) -> Path:
@@ -147,13 +199,13 @@ def read_document(path: str | Path) -> Track:
         else:
             doc = yaml.safe_load(text)
     except (UnicodeDecodeError, json.JSONDecodeError, yaml.YAMLError) as exc:
-        raise TrackFileError(f"{path}: not valid {path.suffix[1:].upper()} ({exc})") from None
+        raise TrackFileError(path, f"not valid {path.suffix[1:].upper()} ({exc})") from None
     try:
-        return track_from_dict(doc, source=str(path))
+        return track_from_dict(doc, source=path.name)
     except TrackFileError:
         raise
     except TrackError as exc:
-        raise TrackFileError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from None
+        raise TrackFileError(path, str(exc)) from None
 
 
 def write_document(track: Track, path: str | Path) -> Path:
@@ -187,4 +239,4 @@ def read_track(path: str | Path, name: str | None = None) -> Track:
                 description=track.description,
             )
         return track
-    raise TrackFileError(f"{path}: unknown track file type {suffix!r}; use one of {SUFFIXES}")
+    raise TrackFileError(path, f"unknown track file type {suffix!r}; use one of {SUFFIXES}")

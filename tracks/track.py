@@ -21,6 +21,12 @@ from tracks.geometry import (
 
 Lane = Literal["center", "inner", "outer", "left", "right"]
 
+MAX_TRACK_POINTS = 2_000
+"""Most distinct points a track may have (a loop's repeated closing point is not counted).
+DeepRacer's own tracks have 22 to 401; the self-crossing check costs time and memory
+quadratic in points (2,000 points: about 0.7 s and 180 MiB a ring), so a larger track is
+refused before it."""
+
 
 class TrackError(ValueError):
     """A track's data is unusable; the message names the problem."""
@@ -110,7 +116,8 @@ class Track:
 
         Consecutive repeated points are dropped; a loop is closed by repeating its first
         point. ``is_loop`` defaults to "first and last centre points coincide". Raises
-        :class:`TrackError` naming the first problem found.
+        :class:`TrackError` naming the first problem found; arrays of more than
+        :data:`MAX_TRACK_POINTS` points are refused before any quadratic check.
         """
         arrays = {"centre line": center, "left border": left, "right border": right}
         cleaned = {}
@@ -124,6 +131,11 @@ class Track:
             if not np.all(np.isfinite(a)):
                 bad = int(np.argwhere(~np.isfinite(a))[0][0])
                 raise TrackError(f"{name}: {what} has a NaN or infinite value at point {bad}")
+            if len(a) > MAX_TRACK_POINTS + 1:  # + a loop's closing point
+                raise TrackError(
+                    f"{name}: {what} has {len(a)} points; a track may have at most "
+                    f"{MAX_TRACK_POINTS}"
+                )
             cleaned[what] = a
         c, lft, rgt = cleaned.values()
         if not (len(c) == len(lft) == len(rgt)):

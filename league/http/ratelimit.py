@@ -7,6 +7,10 @@ server has not seen succeed, is charged to its client address, so a flood of ran
 tokens from one address shares one bucket. A token that later answers 401 (revoked,
 rotated) is forgotten.
 
+IPv6 clients are keyed by their /64 (one subscriber's usual allocation), IPv4 clients by
+address. Both tables are bounded: past ``max_keys`` the least recently used key is evicted,
+so a flood of new keys never resets the buckets of clients that keep coming.
+
 A pure ASGI middleware, so it costs a few dict lookups per request. Buckets live in memory:
 with several server processes each enforces the limit on its own share of the traffic.
 """
@@ -14,26 +18,34 @@ with several server processes each enforces the limit on its own share of the tr
 from __future__ import annotations
 
 import hashlib
+import ipaddress
 import json
 import math
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
 Scope = dict[str, Any]
 ASGIApp = Callable[..., Any]
 EXEMPT_PATHS = ("/healthz", "/readyz")
+MAX_KEYS = 100_000
+IPV6_PREFIX = 64
 
 
 class TokenBucket:
-    """``rate`` tokens per second up to ``burst``; ``take(key)`` answers wait seconds or 0."""
+    """``rate`` tokens per second up to ``burst``; ``take(key)`` answers wait seconds or 0.
 
-    def __init__(self, rate: float, burst: int, max_keys: int = 100_000) -> None:
+    At most ``max_keys`` buckets are kept; a new key past that evicts the least recently
+    used one (a bucket idle that long has mostly refilled, so little is forgiven).
+    """
+
+    def __init__(self, rate: float, burst: int, max_keys: int = MAX_KEYS) -> None:
         self.rate = rate
         self.burst = float(burst)
         self.max_keys = max_keys
-        self._buckets: dict[str, tuple[float, float]] = {}
+        self._buckets: OrderedDict[str, tuple[float, float]] = OrderedDict()
         self._lock = threading.Lock()
 
     def take(self, key: str, now: float | None = None) -> float:
@@ -42,35 +54,46 @@ class TokenBucket:
         with self._lock:
             tokens, last = self._buckets.get(key, (self.burst, now))
             tokens = min(self.burst, tokens + (now - last) * self.rate)
-            if tokens < 1.0:
-                self._buckets[key] = (tokens, now)
-                return (1.0 - tokens) / self.rate
-            if len(self._buckets) >= self.max_keys and key not in self._buckets:
-                self._buckets.clear()  # a flood of new keys: start over rather than grow
-            self._buckets[key] = (tokens - 1.0, now)
-            return 0.0
+            wait = 0.0 if tokens >= 1.0 else (1.0 - tokens) / self.rate
+            self._buckets[key] = (tokens if wait else tokens - 1.0, now)
+            self._buckets.move_to_end(key)
+            while len(self._buckets) > self.max_keys:
+                self._buckets.popitem(last=False)
+            return wait
+
+    def __len__(self) -> int:
+        """How many keys have a bucket now."""
+        return len(self._buckets)
 
 
 class KnownTokens:
-    """Digests of bearer tokens that checked out, mapped to their racer id (bounded)."""
+    """Digests of bearer tokens that checked out, mapped to their racer id (bounded, LRU)."""
 
-    def __init__(self, max_keys: int = 100_000) -> None:
+    def __init__(self, max_keys: int = MAX_KEYS) -> None:
         self.max_keys = max_keys
-        self._racers: dict[str, int] = {}
+        self._racers: OrderedDict[str, int] = OrderedDict()
+        self._lock = threading.Lock()
 
     def racer(self, digest: str) -> int | None:
         """The racer whose token has this digest, if it was seen to check out."""
-        return self._racers.get(digest)
+        with self._lock:
+            racer_id = self._racers.get(digest)
+            if racer_id is not None:
+                self._racers.move_to_end(digest)
+            return racer_id
 
     def remember(self, digest: str, racer_id: int) -> None:
-        """Record a token that checked out."""
-        if len(self._racers) >= self.max_keys and digest not in self._racers:
-            self._racers.clear()
-        self._racers[digest] = racer_id
+        """Record a token that checked out, evicting the least recently used past the cap."""
+        with self._lock:
+            self._racers[digest] = racer_id
+            self._racers.move_to_end(digest)
+            while len(self._racers) > self.max_keys:
+                self._racers.popitem(last=False)
 
     def forget(self, digest: str) -> None:
         """Drop a token that no longer checks out."""
-        self._racers.pop(digest, None)
+        with self._lock:
+            self._racers.pop(digest, None)
 
 
 def token_digest(scope: Scope) -> str | None:
@@ -82,9 +105,18 @@ def token_digest(scope: Scope) -> str | None:
 
 
 def address_key(scope: Scope) -> str:
-    """The bucket of the client address."""
+    """The bucket of the client address: the address for IPv4, its /64 for IPv6."""
     client = scope.get("client")
-    return "ip:" + (client[0] if client else "unknown")
+    host = client[0] if client else "unknown"
+    try:
+        address = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return "ip:" + host[:64]
+    if isinstance(address, ipaddress.IPv6Address):
+        if address.ipv4_mapped is not None:
+            return f"ip:{address.ipv4_mapped}"
+        return f"ip:{ipaddress.IPv6Network((address, IPV6_PREFIX), strict=False)}"
+    return f"ip:{address}"
 
 
 class RateLimitMiddleware:

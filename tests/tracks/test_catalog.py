@@ -17,7 +17,7 @@ from tracks.catalog import (
     list_tracks,
     user_track_dir,
 )
-from tracks.io import TrackFileError, write_document
+from tracks.io import TrackFileError, read_document, write_document
 from tracks.track import TrackError
 
 
@@ -77,8 +77,9 @@ def test_import_round_trip_and_listing(tmp_path, home):
     infos = {i.name: i for i in list_tracks()}
     assert infos["my_loop"].source == "user"
     assert infos["beginner_loop"].source == "builtin"
-    with pytest.raises(TrackNotFoundError, match="my_loop"):
+    with pytest.raises(TrackNotFoundError, match="tracks list") as unknown:
         get_track("zzz")
+    assert "my_loop" not in str(unknown.value)  # another user's track is not shown
 
 
 def test_import_with_new_name_and_no_silent_overwrite(tmp_path, home):
@@ -146,3 +147,42 @@ def test_import_real_deepracer_file(home, shared_tracks):
     assert track.length == pytest.approx(17.7, abs=0.1)
     assert _user_files(home) == ["reinvent_base.json"]
     assert get_track("reinvent_base").length == pytest.approx(track.length)
+
+
+def test_a_user_track_is_read_once_per_version_of_its_file(tmp_path, home, monkeypatch):
+    """Repeated lookups reuse the checked geometry; a rewritten file is read again."""
+    import_track(_copy_of_builtin(tmp_path))
+    reads = []
+
+    def counting_read(path):
+        reads.append(path)
+        return read_document(path)
+
+    monkeypatch.setattr(catalog, "read_document", counting_read)
+    first = [get_track("my_loop", direction) for direction in ("ccw", "cw", None) * 20]
+    assert len(reads) == 1 and first[0].name == "my_loop"
+    wider = json.loads((home / "tracks" / "my_loop.json").read_text())
+    wider["display_name"] = "My loop, renamed"
+    (home / "tracks" / "my_loop.json").write_text(json.dumps(wider))
+    assert get_track("my_loop").display_name == "My loop, renamed"
+    assert len(reads) == 2
+
+
+def test_the_user_track_cache_is_bounded(tmp_path, home):
+    catalog._read_version.cache_clear()
+    for i in range(catalog.USER_TRACK_CACHE_SIZE + 8):
+        import_track(_copy_of_builtin(tmp_path, f"loop{i}"))
+        get_track(f"loop{i}")
+    assert catalog._read_version.cache_info().currsize == catalog.USER_TRACK_CACHE_SIZE
+
+
+def test_a_broken_user_track_names_the_track_not_the_server_path(home):
+    folder = home / "tracks"
+    folder.mkdir(parents=True)
+    (folder / "broken.json").write_text('{"name": "broken", "centerline": [[0, 0]]')
+    (folder / "crossed.json").write_text(json.dumps({"name": "crossed", "centerline": 7}))
+    for name in ("broken", "crossed"):
+        with pytest.raises(TrackError) as err:
+            get_track(name)
+        message = str(err.value)
+        assert f"'{name}'" in message and str(home) not in message and ".json" not in message

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 from tracks.catalog import builtin_names, get_track
 from tracks.cli import app
 from tracks.io import write_document
+from tracks.raceline import CarLimits
 
 runner = CliRunner()
 
@@ -88,7 +89,20 @@ def test_import_real_file_then_raceline(home, shared_tracks):
     doc = json.loads(_ok("raceline", "reinvent_base", "--json").stdout)
     assert doc["track"] == "reinvent_base"
     assert doc["length"] == pytest.approx(17.7, abs=0.1)
-    assert doc["length"] / 4.0 < doc["lap_time"] < doc["centerline_lap_time"]
-    assert doc["limits"]["max_speed"] == 4.0
+    top = CarLimits().max_speed
+    assert doc["length"] / top < doc["lap_time"] < doc["centerline_lap_time"]
+    assert doc["limits"]["max_speed"] == top
     text = _ok("raceline", "reinvent_base", "--direction", "cw").stdout
     assert "physical-limit lap time" in text
+
+
+def test_import_of_an_npy_claiming_a_huge_shape_is_a_track_file_error(tmp_path, home):
+    """608 bytes whose header claims (2e9, 6) floats: an error line, no traceback, no file."""
+    header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2000000000, 6), }"
+    header += " " * (118 - len(header) - 1) + "\n"
+    data = b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode()
+    bomb = tmp_path / "bomb.npy"
+    bomb.write_bytes(data + bytes(608 - len(data)))
+    err = _fails("import", str(bomb))
+    assert "bomb.npy" in err and "at most 2000" in err
+    assert not (home / "tracks").exists() or not list((home / "tracks").iterdir())

@@ -12,10 +12,12 @@ from tests.conftest import ellipse_track
 from tracks.io import (
     TrackFileError,
     read_track,
+    track_from_deepracer_array,
     track_to_deepracer_array,
     write_document,
     write_npy,
 )
+from tracks.track import MAX_TRACK_POINTS
 
 TRACK = ellipse_track()
 
@@ -145,3 +147,52 @@ def test_invalid_json_and_unknown_suffix(tmp_path: Path) -> None:
     other.write_text("1,2")
     with pytest.raises(TrackFileError, match="unknown track file type"):
         read_track(other)
+
+
+def _npy_claiming(shape: tuple[int, ...], total_bytes: int) -> bytes:
+    """A .npy file of ``total_bytes`` whose header claims a float64 array of ``shape``."""
+    header = f"{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}"
+    header += " " * (118 - len(header) - 1) + "\n"
+    data = b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode()
+    return data + bytes(total_bytes - len(data))
+
+
+def test_npy_header_claiming_a_huge_array_is_refused_before_allocating(tmp_path: Path) -> None:
+    """608 bytes claiming (2e9, 6) floats (89 GiB): a track-file error, never an allocation."""
+    bomb = tmp_path / "bomb.npy"
+    bomb.write_bytes(_npy_claiming((2_000_000_000, 6), 608))
+    assert bomb.stat().st_size == 608
+    with pytest.raises(TrackFileError, match="at most 2000") as err:
+        read_track(bomb)
+    assert "bomb.npy" in str(err.value)
+    short = tmp_path / "short.npy"
+    short.write_bytes(_npy_claiming((1_500, 6), 608))  # rows within the cap, data missing
+    with pytest.raises(TrackFileError, match="declares"):
+        read_track(short)
+
+
+def _circle(points: int) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, points, endpoint=False)
+    ring = np.stack([np.cos(t), np.sin(t)], axis=1)
+    arr = np.hstack([5 * ring, 4.6 * ring, 5.4 * ring])
+    return np.vstack([arr, arr[:1]])
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".json"])
+def test_tracks_over_the_point_cap_are_refused(tmp_path: Path, suffix: str) -> None:
+    """A clean but long track is refused with the cap named, before the quadratic check."""
+    arr = _circle(MAX_TRACK_POINTS + 500)
+    path = _save(tmp_path, arr, "long.npy")
+    if suffix == ".json":
+        doc = {
+            "name": "long",
+            "centerline": arr[:-1, 0:2].tolist(),
+            "left_border": arr[:-1, 2:4].tolist(),
+            "right_border": arr[:-1, 4:6].tolist(),
+        }
+        path = tmp_path / "long.json"
+        path.write_text(json.dumps(doc))
+    with pytest.raises(TrackFileError, match=f"at most {MAX_TRACK_POINTS}"):
+        read_track(path)
+    within = track_from_deepracer_array(_circle(MAX_TRACK_POINTS), "within")
+    assert len(within.waypoints) == MAX_TRACK_POINTS + 1  # the loop's closing point

@@ -45,11 +45,15 @@ def read_track(
         Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
     ] = None,
 ) -> TrackGeometry:
-    """The centre line (waypoints) and left / right borders of a built-in or imported track."""
+    """The centre line (waypoints) and left / right borders of a built-in or imported track.
+
+    An imported track is checked once per version of its file (``tracks.catalog``); the
+    404's text names no server path and lists the built-in tracks only.
+    """
     try:
         track = get_track(name, direction)
-    except TrackError:
-        raise HTTPException(404, f"Track {name!r} not found.") from None
+    except TrackError as exc:
+        raise HTTPException(404, f"Track {name!r} not found: {exc}.") from None
     return TrackGeometry(
         name=track.name,
         display_name=track.display_name,
