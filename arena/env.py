@@ -500,9 +500,7 @@ class RacingEnv(ParallelEnv):
         if agent is None:
             return ContactParty("bot", arc, toward)
         live = self._cars[agent]
-        rejoining = (
-            live.released_at is not None and self.time - live.released_at <= REJOIN_S + 1e-9
-        )
+        rejoining = live.released_at is not None and self.time - live.released_at <= REJOIN_S + 1e-9
         return ContactParty("car", arc, toward, held=live.hold is not None, rejoining=rejoining)
 
     def _respawn_and_release(self, verdicts: Mapping[str, _Verdict]) -> None:
@@ -862,6 +860,11 @@ class RacingEnv(ParallelEnv):
         }
 
     # ----------------------------------------------------------- rendering etc
+    def retire(self, agent: str) -> None:
+        """End ``agent``'s race now, as a DNF (neither finished nor out of time): it drives
+        this control step and is then parked off the track, as any car whose race is over."""
+        self._cars[agent].record.done = True
+
     def record(self, agent: str) -> CarRecord:
         """A car's racing record: laps, lap times, incidents, penalties."""
         return self._cars[agent].record

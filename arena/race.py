@@ -10,9 +10,14 @@ from __future__ import annotations
 
 import json
 import math
+import time
+from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
+
+import numpy as np
+from gymnasium import spaces
 
 from arena.config import RaceConfig
 from arena.env import RacingEnv, RewardFunction
@@ -46,7 +51,9 @@ class CarResult:
     winner, ``None`` for a car that did not finish (and for every car when none finished).
     ``grid_offset`` is where the car started, metres along the track from the front of the
     grid (0.0 for the front slot, negative behind it); ``None`` in results stored before it
-    was recorded.
+    was recorded. ``dnf_reason`` says why a car the race's :class:`StepGuard` took out did
+    not finish (its policy raised a fault, or its steps were over the time budget); ``None``
+    for every other car.
     """
 
     name: str
@@ -68,6 +75,26 @@ class CarResult:
     laps_led: int = 0
     gap_to_winner: float | None = None
     grid_offset: float | None = None
+    dnf_reason: str | None = None
+
+
+@dataclass(frozen=True)
+class StepGuard:
+    """When a car is taken out of a race for how its policy behaves; the other cars race on.
+
+    ``faults`` are exception types a policy's ``act`` may raise that retire that car (DNF,
+    the exception's text as its reason) instead of ending the race. ``budget_ms`` is the CPU
+    time one ``act`` may take, on the calling thread's clock (as
+    :mod:`submissions.onnx_checks` times a step at validation); a car whose fastest step of
+    its last ``window`` steps is over it is retired too. ``None``: no budget. A retired car
+    drives one more control step (its last action) and is then parked off the track.
+    ``cars`` names the cars guarded (``None``: all of them); the others drive unwatched.
+    """
+
+    faults: tuple[type[Exception], ...] = ()
+    budget_ms: float | None = None
+    window: int = 10
+    cars: frozenset[str] | None = None
 
 
 @dataclass(frozen=True)
@@ -150,6 +177,51 @@ def _act(policy: Policy, observation: dict[str, Any], info: dict[str, Any]) -> A
     return policy.act(observation)
 
 
+def _idle(space: spaces.Space) -> Any:
+    """An action of ``space`` for a car that has none of its own (retired on its first step)."""
+    return 0 if isinstance(space, spaces.Discrete) else np.zeros(space.shape, np.float32)
+
+
+class _Steward:
+    """Applies a :class:`StepGuard` to the cars' policies: times each step, retires cars."""
+
+    def __init__(self, env: RacingEnv, guard: StepGuard) -> None:
+        self.env = env
+        self.guard = guard
+        self.reasons: dict[str, str] = {}
+        self._last: dict[str, Any] = {}
+        self._times: dict[str, deque[float]] = {}
+
+    def act(self, name: str, policy: Policy, observation: dict, info: dict) -> Any:
+        """The car's action this step; a retired car repeats its last one."""
+        if name in self.reasons:
+            return self._last.get(name, _idle(self.env.action_space(name)))
+        if self.guard.cars is not None and name not in self.guard.cars:
+            return _act(policy, observation, info)
+        start = time.thread_time()
+        try:
+            action = _act(policy, observation, info)
+        except self.guard.faults as exc:
+            self._retire(name, f"model fault: {exc}")
+            return self._last.get(name, _idle(self.env.action_space(name)))
+        self._last[name] = action
+        budget = self.guard.budget_ms
+        if budget is not None:
+            took = self._times.setdefault(name, deque(maxlen=self.guard.window))
+            took.append((time.thread_time() - start) * 1000.0)
+            if len(took) == took.maxlen and min(took) > budget:
+                self._retire(
+                    name,
+                    f"too slow: its fastest of {len(took)} steps took {min(took):.1f} ms of "
+                    f"CPU time, over the budget of {budget:g} ms a step",
+                )
+        return action
+
+    def _retire(self, name: str, reason: str) -> None:
+        self.reasons[name] = reason[:500]
+        self.env.retire(name)
+
+
 def run_race(
     config: RaceConfig,
     policies: Mapping[str, Policy],
@@ -157,11 +229,14 @@ def run_race(
     reward_functions: RewardFunction | Mapping[str, RewardFunction] | None = None,
     on_step: Callable[[RacingEnv], None] | None = None,
     record_trace: bool = True,
+    guard: StepGuard | None = None,
 ) -> RaceResult:
     """Race ``policies`` (one per car name in ``config.cars``) until every car is done.
 
     ``on_step(env)`` is called after each control step (progress bars, video frames).
-    The same config, seed and policies give an identical result.
+    ``guard`` retires cars whose policy faults or is too slow (:class:`StepGuard`);
+    without one a policy's exception ends the race. The same config, seed and policies give
+    an identical result (a step budget depends on the machine's speed too).
     """
     names = [c.name for c in config.cars]
     missing = [n for n in names if n not in policies]
@@ -179,9 +254,12 @@ def run_race(
         last_info = dict(infos)
         grid = _grid_offsets(env, names)
         metrics = RacingMetrics(grid)
+        steward = _Steward(env, guard or StepGuard())
         steps = 0
         while env.agents:
-            actions = {a: _act(policies[a], observations[a], last_info[a]) for a in env.agents}
+            actions = {
+                a: steward.act(a, policies[a], observations[a], last_info[a]) for a in env.agents
+            }
             observations, rewards, _, _, infos = env.step(actions)
             steps += 1
             last_info.update(infos)
@@ -192,9 +270,18 @@ def run_race(
                     bots.append([list(b) for b in env.bot_poses()])
             if on_step is not None:
                 on_step(env)
-        return _result(config, env, steps, trace, facts, bots, obstacles, metrics, grid)
+        result = _result(config, env, steps, trace, facts, bots, obstacles, metrics, grid)
+        return _with_reasons(result, steward.reasons)
     finally:
         env.close()
+
+
+def _with_reasons(result: RaceResult, reasons: Mapping[str, str]) -> RaceResult:
+    """``result`` with each retired car's DNF reason."""
+    if not reasons:
+        return result
+    cars = [replace(c, dnf_reason=reasons[c.name]) if c.name in reasons else c for c in result.cars]
+    return replace(result, cars=cars)
 
 
 def _grid_offsets(env: RacingEnv, names: list[str]) -> dict[str, float]:

@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from datetime import datetime
 from typing import TYPE_CHECKING
 
-from sqlalchemy import select, update
+from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
@@ -29,6 +29,14 @@ if TYPE_CHECKING:
 
 class Conflict(ValueError):
     """The request clashes with what is stored (a duplicate, a closed event)."""
+
+
+class EntryLimit(Conflict):
+    """The racer has as many entries in the event as a racer may."""
+
+
+class QueueFull(Conflict):
+    """The racer's queued evaluation jobs plus the entry's would pass their cap (retry later)."""
 
 
 class UnknownRacer(LookupError):
@@ -147,12 +155,64 @@ def is_entered(session: Session, model_id: int) -> bool:
     return session.scalar(select(Entry.id).where(Entry.model_id == model_id).limit(1)) is not None
 
 
+def _check_entry_limits(
+    session: Session, event: Event, racer_id: int, max_entries: int, max_queued: int
+) -> None:
+    """Refuse an entry past the racer's caps (:class:`EntryLimit`, :class:`QueueFull`).
+
+    Begins with a write to the racer's row, so that two entries of one racer are counted
+    one after the other (a row lock on PostgreSQL, the write lock on SQLite).
+    """
+    session.execute(update(Racer).where(Racer.id == racer_id).values(role=Racer.role))
+    entries = session.scalar(
+        select(func.count(Entry.id)).where(Entry.event_id == event.id, Entry.racer_id == racer_id)
+    )
+    if entries >= max_entries:
+        session.rollback()
+        raise EntryLimit(
+            f"You have {entries} entries in event {event.id}, the most one racer may have "
+            f"({max_entries})."
+        )
+    adds = 0 if event.race_type == "head_to_model" else len(event.seeds)
+    if adds == 0:
+        return
+    waiting = session.scalar(
+        select(func.count(Job.id))
+        .join(Entry, Entry.id == Job.entry_id)
+        .where(Entry.racer_id == racer_id, Job.status.in_(("queued", "running")))
+    )
+    if waiting + adds > max_queued:
+        session.rollback()
+        raise QueueFull(
+            f"You have {waiting} evaluation jobs waiting or running and this entry adds "
+            f"{adds}; one racer may have {max_queued}. Enter again once some have raced."
+        )
+
+
 def enter_model(
-    session: Session, event: Event, model: Model, now: datetime
+    session: Session,
+    event: Event,
+    model: Model,
+    now: datetime,
+    *,
+    max_entries: int | None = None,
+    max_queued: int | None = None,
 ) -> tuple[Entry, list[Job]]:
-    """Enter ``model`` in ``event``; queue one evaluation job per seed (none head-to-head)."""
+    """Enter ``model`` in ``event``; queue one evaluation job per seed (none head-to-head).
+
+    With ``max_entries`` / ``max_queued`` (the settings ``max_entries_per_racer`` and
+    ``max_queued_jobs_per_racer``) an entry past the owner's caps is refused.
+    """
     if not event.is_open(now):
         raise Conflict(f"Event {event.id} is not open for entries.")
+    if max_entries is not None or max_queued is not None:
+        _check_entry_limits(
+            session,
+            event,
+            model.owner_id,
+            max_entries if max_entries is not None else 2**31,
+            max_queued if max_queued is not None else 2**31,
+        )
     entry = Entry(event_id=event.id, model_id=model.id, racer_id=model.owner_id)
     session.add(entry)
     try:
@@ -180,7 +240,9 @@ def record_race(
     commit: bool = True,
 ) -> Race:
     """Store a finished race: config, per-car results (ms) and racing metrics, the replay file
-    (trace, bots, obstacles and the overtake and contact events), the job it ran for.
+    (trace, bots, obstacles and the overtake and contact events), the job it ran for. A car
+    taken out of the race for a model fault keeps its reason (``RaceCar.dnf_reason``, and
+    the summary's ``dnf_reasons`` by car name, which the race's API result shows).
 
     ``entries`` maps car names to the entries that drove them (bots have none). The job's
     own state is the queue's (:func:`league.jobs.queue.claim_done`). With ``commit=False`` the
@@ -198,6 +260,7 @@ def record_race(
             "finish_order": result.finish_order,
             "duration": result.duration,
             "steps": result.steps,
+            "dnf_reasons": {c.name: c.dnf_reason for c in result.cars if c.dnf_reason},
         },
         trace_sha256=trace_sha,
     )
@@ -225,6 +288,7 @@ def record_race(
                 at_fault_collisions=car.at_fault_collisions,
                 laps_led=car.laps_led,
                 gap_to_winner_ms=_ms(car.gap_to_winner),
+                dnf_reason=car.dnf_reason,
             )
         )
     session.add(race)

@@ -75,7 +75,10 @@ def _in(column: str, values: tuple[str, ...]) -> str:
 
 
 class Racer(Base):
-    """A person (or team) with an alias; only the sha256 of their API token is stored."""
+    """A person (or team) with an alias; only the sha256 of their API token is stored.
+
+    ``queue_served_at`` is when the queue last leased one of their evaluation jobs (the
+    queue serves racers in turn, :mod:`league.jobs.queue`)."""
 
     __tablename__ = "racers"
     __table_args__ = (CheckConstraint(_in("role", ("racer", "admin")), name="role"),)
@@ -85,6 +88,7 @@ class Racer(Base):
     role: Mapped[str] = mapped_column(String(16), default="racer")
     token_hash: Mapped[str] = mapped_column(String(64), unique=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    queue_served_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
 
 
 class Model(Base):
@@ -107,7 +111,9 @@ class Model(Base):
 class Event(Base):
     """One leaderboard: a ruleset frozen at creation, a time window and evaluation seeds.
 
-    ``final_standings`` is the snapshot the scheduler writes once the event has closed."""
+    ``final_standings`` is the snapshot the scheduler writes once the event has closed;
+    ``rounds_served_at`` is when the queue last leased one of its round jobs (its rounds
+    take their turn like a racer, :mod:`league.jobs.queue`)."""
 
     __tablename__ = "events"
     __table_args__ = (
@@ -136,6 +142,7 @@ class Event(Base):
         ForeignKey("racers.id", ondelete="SET NULL"), nullable=True
     )
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    rounds_served_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
 
     def is_open(self, now: datetime) -> bool:
         """True while entries are accepted."""
@@ -149,7 +156,12 @@ class Event(Base):
 
 
 class Entry(Base):
-    """A racer's model entered into an event (once per model and event)."""
+    """A racer's model entered into an event (once per model and event).
+
+    ``suspended_at`` and ``suspension`` (the message its owner reads) are set once the model
+    broke too many of the event's races (:mod:`league.jobs.faults`); a suspended entry races
+    no more in that event.
+    """
 
     __tablename__ = "entries"
     __table_args__ = (UniqueConstraint("event_id", "model_id"),)
@@ -159,6 +171,8 @@ class Entry(Base):
     model_id: Mapped[int] = mapped_column(ForeignKey("models.id", ondelete="CASCADE"), index=True)
     racer_id: Mapped[int] = mapped_column(ForeignKey("racers.id", ondelete="CASCADE"), index=True)
     created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    suspended_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
+    suspension: Mapped[str | None] = mapped_column(Text, nullable=True)
 
 
 class Job(Base):
@@ -256,6 +270,7 @@ class RaceCar(Base):
     at_fault_collisions: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     laps_led: Mapped[int] = mapped_column(Integer, default=0, server_default="0")
     gap_to_winner_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    dnf_reason: Mapped[str | None] = mapped_column(Text, nullable=True)
 
     race: Mapped[Race] = relationship(back_populates="cars")
 

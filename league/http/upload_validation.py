@@ -10,6 +10,8 @@ becomes a :class:`~submissions.Problem`, so the API process never parses the gra
 builds an onnxruntime session, and its memory stays flat. :class:`UploadValidator` lets
 ``validation_concurrency`` children run at once and ``validation_queue`` uploads wait (at
 most ``validation_wait_seconds``); beyond that it raises :class:`ValidationBusy` (503).
+The slots are shared per racer: one racer may have ``validation_per_racer`` uploads being
+validated or waiting, so a burst of one racer's uploads leaves room for everyone else's.
 """
 
 from __future__ import annotations
@@ -42,6 +44,10 @@ def _refused(expected: str, found: str, message: str) -> ValidationReport:
     return ValidationReport(problems=(problem,))
 
 
+class RacerUploadLimit(ValidationBusy):
+    """This racer already has as many uploads validating or waiting as one racer may (429)."""
+
+
 class UploadValidator:
     """Runs validation children for the API: bounded in number, each under limits."""
 
@@ -57,26 +63,68 @@ class UploadValidator:
         self._line = settings.validation_queue
         self._wait_seconds = settings.validation_wait_seconds
         self._waiting = 0
+        self._per_racer = settings.validation_per_racer
+        self._racer_running = max(1, settings.validation_concurrency - 1)
+        self._racers: dict[int, tuple[int, asyncio.Semaphore]] = {}
 
     @asynccontextmanager
-    async def slot(self) -> AsyncIterator[None]:
-        """Hold one validation slot, waiting in line if there is room; else ValidationBusy."""
+    async def slot(self, racer_id: int | None = None) -> AsyncIterator[None]:
+        """Hold one validation slot, waiting in line if there is room; else ValidationBusy.
+
+        With ``racer_id`` the slots are shared per racer: a racer may have
+        ``validation_per_racer`` uploads holding or waiting for a slot (past that the upload
+        is refused at once) and hold all but one slot (when there are several), so another
+        racer's upload always finds a slot within one validation."""
+        if racer_id is None:
+            async with self._held(None):
+                yield
+            return
+        count, own = self._racers.get(racer_id, (0, asyncio.Semaphore(self._racer_running)))
+        if count >= self._per_racer:
+            raise RacerUploadLimit(
+                f"You have {count} uploads being validated or waiting, the most one racer "
+                "may have; send the next one when one of them is done."
+            )
+        self._racers[racer_id] = (count + 1, own)
+        try:
+            async with self._held(own):
+                yield
+        finally:
+            count, own = self._racers[racer_id]
+            if count > 1:
+                self._racers[racer_id] = (count - 1, own)
+            else:
+                del self._racers[racer_id]
+
+    @asynccontextmanager
+    async def _held(self, own: asyncio.Semaphore | None) -> AsyncIterator[None]:
+        """Take the racer's own slot (``own``) then a shared one, waiting in line at most
+        ``validation_wait_seconds`` in all; ValidationBusy when the line is full."""
         if self._slots.locked() and self._waiting >= self._line:
             raise ValidationBusy("Every validation slot is busy and the line is full.")
         self._waiting += 1
+        taken: list[asyncio.Semaphore] = []
         try:
             async with asyncio.timeout(self._wait_seconds):
-                await self._slots.acquire()
-        except TimeoutError:
-            raise ValidationBusy(
-                f"No validation slot came free within {self._wait_seconds:g} s."
-            ) from None
+                for semaphore in (own, self._slots):
+                    if semaphore is not None:
+                        await semaphore.acquire()
+                        taken.append(semaphore)
+        except BaseException as exc:  # timed out, or the client left while waiting
+            for semaphore in taken:
+                semaphore.release()
+            if isinstance(exc, TimeoutError):
+                raise ValidationBusy(
+                    f"No validation slot came free within {self._wait_seconds:g} s."
+                ) from None
+            raise
         finally:
             self._waiting -= 1
         try:
             yield
         finally:
-            self._slots.release()
+            for semaphore in taken:
+                semaphore.release()
 
     async def validate(self, data: bytes) -> ValidationReport:
         """The report on ``data`` from a child under the limits (hold a :meth:`slot`)."""

@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session
 
 from arena.config import CarConfig, RaceConfig, resolve_track
 from arena.policy import Policy
+from arena.race import StepGuard
 from league.models import Entry, Event, Job, Model
 from league.store.base import DigestMismatch, FileStore
 
@@ -34,10 +35,28 @@ class CarPlan:
 
 @dataclass(frozen=True)
 class RacePlan:
-    """Everything needed to run one job's race, and nothing from the database."""
+    """Everything needed to run one job's race, and nothing from the database.
+
+    ``step_budget_ms`` and ``step_window`` are the submitted models' per-step CPU budget
+    (:class:`arena.race.StepGuard`); ``None``: no budget.
+    """
 
     config: RaceConfig
     cars: tuple[CarPlan, ...]
+    step_budget_ms: float | None = None
+    step_window: int = 10
+
+    def guard(self) -> StepGuard:
+        """What takes a submitted model out of this race (DNF) rather than ending it: an
+        output that is NaN or inf, or steps over the budget. Bots are not guarded."""
+        from submissions import NonFiniteOutput
+
+        return StepGuard(
+            faults=(NonFiniteOutput,),
+            budget_ms=self.step_budget_ms,
+            window=self.step_window,
+            cars=frozenset(c.name for c in self.cars if c.model is not None),
+        )
 
 
 def car_name(slot: dict[str, Any], index: int) -> str:
@@ -75,14 +94,34 @@ def checked_model_bytes(storage: FileStore, model: Model) -> bytes:
         ) from None
 
 
-def build_plan(session: Session, storage: FileStore, job: Job) -> RacePlan:
-    """The race for ``job``: event ruleset + cars (models' declared sensors) + job seed."""
+class EntrySuspended(ValueError):
+    """An evaluation job's entry was suspended from its event: the job is not raced."""
+
+
+def build_plan(
+    session: Session,
+    storage: FileStore,
+    job: Job,
+    *,
+    step_budget_ms: float | None = None,
+    step_window: int = 10,
+) -> RacePlan:
+    """The race for ``job``: event ruleset + cars (models' declared sensors) + job seed.
+
+    Entries suspended from the event (:mod:`league.jobs.faults`) leave a round's grid (a
+    bot fills it back to two cars, as matchmaking does for a lone model); an evaluation job
+    of a suspended entry raises :class:`EntrySuspended`.
+    """
     event = session.get_one(Event, job.event_id)
     cars, plans = [], []
     for index, slot in enumerate(lineup(job)):
         name = car_name(slot, index)
         if "entry_id" in slot:
             entry = session.get_one(Entry, slot["entry_id"])
+            if entry.suspended_at is not None:
+                if job.kind == "evaluation":
+                    raise EntrySuspended(f"entry {entry.id} is suspended: {entry.suspension}")
+                continue
             model = session.get_one(Model, entry.model_id)
             cars.append(model_car(name, model.info))
             plans.append(CarPlan(name, entry.id, model=checked_model_bytes(storage, model)))
@@ -91,8 +130,13 @@ def build_plan(session: Session, storage: FileStore, job: Job) -> RacePlan:
                 raise ValueError(f"unknown bot {slot.get('bot')!r} in job {job.id}")
             cars.append(CarConfig(name=name))
             plans.append(CarPlan(name, None, bot=slot["bot"]))
+    slots = len(lineup(job))
+    while job.kind == "round" and len(cars) < 2:  # suspensions emptied the grid: a bot fills it
+        name = car_name({}, slots + len(cars))
+        cars.append(CarConfig(name=name))
+        plans.append(CarPlan(name, None, bot=BOTS[0]))
     config = RaceConfig.build(**event.ruleset, cars=cars, seed=job.seed)
-    return RacePlan(config, tuple(plans))
+    return RacePlan(config, tuple(plans), step_budget_ms, step_window)
 
 
 def encode_plan(plan: RacePlan) -> bytes:
@@ -100,7 +144,14 @@ def encode_plan(plan: RacePlan) -> bytes:
     cars = [
         [c.name, c.entry_id, c.bot, None if c.model is None else len(c.model)] for c in plan.cars
     ]
-    head = json.dumps({"config": json.loads(plan.config.to_json()), "cars": cars}).encode()
+    head = json.dumps(
+        {
+            "config": json.loads(plan.config.to_json()),
+            "cars": cars,
+            "step_budget_ms": plan.step_budget_ms,
+            "step_window": plan.step_window,
+        }
+    ).encode()
     models = b"".join(c.model for c in plan.cars if c.model is not None)
     return len(head).to_bytes(8, "big") + head + models
 
@@ -114,7 +165,8 @@ def decode_plan(data: bytes) -> RacePlan:
         model = None if size is None else data[offset : offset + size]
         offset += size or 0
         cars.append(CarPlan(name, entry_id, model=model, bot=bot))
-    return RacePlan(RaceConfig.model_validate(head["config"]), tuple(cars))
+    config = RaceConfig.model_validate(head["config"])
+    return RacePlan(config, tuple(cars), head.get("step_budget_ms"), head.get("step_window", 10))
 
 
 def policies(plan: RacePlan) -> dict[str, Policy]:
@@ -131,8 +183,8 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
     for car, spec in zip(plan.cars, plan.config.cars, strict=True):
         if car.model is not None:
             # A graph can still output NaN on a real race's observations (the validator
-            # tries random ones): the race stops with a clear error rather than letting
-            # the car drive on sanitised garbage.
+            # tries random ones): the runner raises rather than letting the car drive on
+            # sanitised garbage, and the race's guard (RacePlan.guard) retires the car.
             drivers[car.name] = load_policy(
                 car.model, non_finite="raise", name=f"car {car.name}", run_policy=False
             )

@@ -1,12 +1,18 @@
 """The job queue in the database: queuing, leasing, heartbeats, completion and lease expiry.
 
+The queue is fair: jobs wait in lanes, one per racer (their evaluation jobs) and one per
+head-to-model event (its round jobs), and :func:`lease_job` serves the lanes in turn: the
+lane served longest ago (or never) gives its oldest job. One racer's hundred jobs wait
+behind everyone else's next one, and a flood of evaluations cannot starve an event's
+rounds. When a lane was last served is kept on its racer (``queue_served_at``) or event
+(``rounds_served_at``), written in the lease's transaction.
+
 A lease is a conditional update: a job moves from ``queued`` to ``running`` only if it is
-still queued, so two workers can never both win it. On PostgreSQL the candidate row is also
-picked with ``SELECT ... FOR UPDATE SKIP LOCKED``, so workers do not queue up behind each
-other's locks; SQLite serialises writers, and the conditional update inside the
-transaction is enough there. Every lease gets a fresh owner token, so a worker whose lease
-expired (and whose job another worker took) can never heartbeat, finish or fail it. A job
-becomes ``done`` only through :func:`claim_done`.
+still queued, so two workers can never both win it (on PostgreSQL a second worker's update
+waits for the first's commit and then finds the job running; SQLite serialises writers).
+Every lease gets a fresh owner token, so a worker whose lease expired (and whose job
+another worker took) can never heartbeat, finish or fail it. A job becomes ``done`` only
+through :func:`claim_done`.
 """
 
 from __future__ import annotations
@@ -18,12 +24,12 @@ from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import ColumnElement, and_, select, update
+from sqlalchemy import ColumnElement, and_, case, func, select, update
 from sqlalchemy.dialects import postgresql, sqlite
 from sqlalchemy.exc import InterfaceError, OperationalError
 from sqlalchemy.orm import Session
 
-from league.models import Job, utcnow
+from league.models import Entry, Event, Job, Racer, utcnow
 
 DB_ERRORS = (OperationalError, InterfaceError)
 """What an unreachable or locked database raises: wait and try again."""
@@ -77,15 +83,42 @@ def _owned(lease: Lease) -> ColumnElement[bool]:
     return and_(Job.id == lease.job_id, Job.lease_owner == lease.owner, Job.status == "running")
 
 
+def _lane_heads(limit: int):
+    """The oldest queued job of each lane, lanes served longest ago (or never) first."""
+    rounds = Job.kind == "round"
+    lane = case((rounds, -Job.event_id), else_=func.coalesce(Entry.racer_id, 0))
+    served = case((rounds, Event.rounds_served_at), else_=Racer.queue_served_at)
+    heads = (
+        select(lane.label("lane"), func.min(Job.id).label("job_id"), func.max(served).label("at"))
+        .select_from(Job)
+        .join(Event, Event.id == Job.event_id)
+        .outerjoin(Entry, Entry.id == Job.entry_id)
+        .outerjoin(Racer, Racer.id == Entry.racer_id)
+        .where(Job.status == "queued")
+        .group_by(lane)
+        .subquery()
+    )
+    return (
+        select(heads.c.job_id, heads.c.lane)
+        .order_by(heads.c.at.asc().nulls_first(), heads.c.job_id)
+        .limit(limit)
+    )
+
+
+def _mark_served(session: Session, lane: int, now: datetime) -> None:
+    if lane < 0:
+        session.execute(update(Event).where(Event.id == -lane).values(rounds_served_at=now))
+    elif lane > 0:
+        session.execute(update(Racer).where(Racer.id == lane).values(queue_served_at=now))
+
+
 def lease_job(
     session: Session, worker: str, lease_s: float, now: datetime | None = None
 ) -> Lease | None:
-    """Lease the oldest queued job for ``worker``; commit and return the lease, or None."""
+    """Lease the next job for ``worker``, lanes in turn (see the module docstring); commit
+    and return the lease, or None when nothing is queued."""
     now = now or utcnow()
-    query = select(Job.id).where(Job.status == "queued").order_by(Job.id).limit(8)
-    if session.get_bind().dialect.name == "postgresql":
-        query = query.limit(1).with_for_update(skip_locked=True)
-    for job_id in session.scalars(query).all():
+    for job_id, lane in session.execute(_lane_heads(8)).all():
         owner = f"{worker}#{uuid.uuid4().hex[:12]}"
         expires = now + timedelta(seconds=lease_s)
         won = session.execute(
@@ -101,6 +134,7 @@ def lease_job(
             .returning(Job.attempts)
         ).scalar_one_or_none()
         if won is not None:
+            _mark_served(session, lane, now)
             session.commit()
             return Lease(job_id, owner, won, expires)
     session.rollback()

@@ -51,11 +51,12 @@ def queue_evaluations(session: Session) -> int:
 
 
 def _candidates(session: Session, event: Event) -> list[Candidate]:
+    """The event's entries that may race (suspended ones may not), with their ratings."""
     start = initial_skill()
     rows = session.execute(
         select(Entry.id, Rating.mu, Rating.sigma)
         .outerjoin(Rating, (Rating.model_id == Entry.model_id) & (Rating.event_id == event.id))
-        .where(Entry.event_id == event.id)
+        .where(Entry.event_id == event.id, Entry.suspended_at.is_(None))
         .order_by(Entry.id)
     ).all()
     return [
@@ -217,8 +218,8 @@ class Scheduler:
 
     def run_forever(self) -> None:
         """Tick until stopped; back off while the database is unreachable."""
-        signal.signal(signal.SIGTERM, self.stop)
-        signal.signal(signal.SIGINT, self.stop)
+        for stop_signal in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
+            signal.signal(stop_signal, self.stop)
         backoff = Backoff()
         log.info("scheduler started")
         while not self.stopping:

@@ -34,7 +34,15 @@ from sqlalchemy.orm import Session
 from arena.race import RaceResult, run_race
 from league import crud
 from league.db import make_engine, make_session_factory
-from league.jobs.evaluation import RacePlan, build_plan, decode_plan, encode_plan, policies
+from league.jobs.evaluation import (
+    EntrySuspended,
+    RacePlan,
+    build_plan,
+    decode_plan,
+    encode_plan,
+    policies,
+)
+from league.jobs.faults import suspend_faulty
 from league.jobs.queue import (
     DB_ERRORS,
     Backoff,
@@ -51,6 +59,7 @@ from league.ranking import rate_race
 from league.settings import Settings
 from league.store import open_storage
 from league.store.base import FileStore, StorageError
+from submissions.validator import DEFAULT_LIMITS
 
 log = logging.getLogger("slipstream.worker")
 RACES_PER_CHILD = 50
@@ -65,7 +74,7 @@ class LeaseLost(RuntimeError):
 
 def race_answer(plan: RacePlan) -> dict[str, Any]:
     """Run the planned race (in the sandboxed child) and return it as JSON-ready data."""
-    return run_race(plan.config, policies(plan), record_trace=True).to_dict()
+    return run_race(plan.config, policies(plan), record_trace=True, guard=plan.guard()).to_dict()
 
 
 def answer_request(request: bytes) -> dict[str, Any]:
@@ -79,12 +88,15 @@ def record_result(
     lease: Lease,
     result: RaceResult,
     entry_ids: Mapping[str, int],
+    fault_limit: int | None = None,
 ) -> Race | None:
     """Store a leased job's race, its cars, trace and ratings in one transaction; commit.
 
     The transaction begins by marking the job done if ``lease`` still holds it
     (:func:`league.jobs.queue.claim_done`); if it does not, nothing is written and the answer
-    is None. ``entry_ids`` maps the race's car names to the entries that drove them.
+    is None. ``entry_ids`` maps the race's car names to the entries that drove them. With
+    ``fault_limit``, an entry with that many fault DNFs in the event is suspended from it in
+    the same transaction (:func:`league.jobs.faults.suspend_faulty`).
     """
     if not claim_done(session, lease):
         session.rollback()
@@ -97,6 +109,11 @@ def record_result(
     race = crud.record_race(session, storage, event, result, entries, job_id=job.id, commit=False)
     if event.race_type == "head_to_model":
         rate_race(session, race)
+    faulted = [entries[c.name] for c in result.cars if c.dnf_reason and c.name in entries]
+    if fault_limit is not None and faulted:
+        session.flush()
+        for entry in suspend_faulty(session, faulted, fault_limit):
+            log.warning("entry %d suspended: %s", entry.id, entry.suspension)
     session.commit()
     return race
 
@@ -121,6 +138,7 @@ class Worker:
             max_runs=RACES_PER_CHILD,
             high_water_mb=CHILD_HIGH_WATER_MB,
         )
+        self.step_budget_ms = settings.race_step_budget_ms or DEFAULT_LIMITS.max_latency_ms
         self.stopping = False
         self.backoff = Backoff()
 
@@ -130,8 +148,8 @@ class Worker:
 
     def run_forever(self) -> None:
         """Work until stopped; back off while the database is unreachable."""
-        signal.signal(signal.SIGTERM, self.stop)
-        signal.signal(signal.SIGINT, self.stop)
+        for stop_signal in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
+            signal.signal(stop_signal, self.stop)
         log.info("worker %s started", self.name)
         while not self.stopping:
             try:
@@ -163,9 +181,18 @@ class Worker:
         """Race a leased job and record its result, or fail it with a clear error."""
         try:
             with self.sessions() as session:
-                plan = build_plan(session, self.storage, session.get_one(Job, lease.job_id))
+                plan = build_plan(
+                    session,
+                    self.storage,
+                    session.get_one(Job, lease.job_id),
+                    step_budget_ms=self.step_budget_ms,
+                    step_window=self.settings.race_step_window,
+                )
         except DB_ERRORS:
             raise
+        except EntrySuspended as exc:  # suspended after this job was queued: not raced
+            self._fail(lease, f"not raced: {exc}")
+            return
         except StorageError as exc:  # the store is unreachable for now: try again later
             self._fail(lease, f"could not read a model file: {exc}", retry=True)
             return
@@ -189,7 +216,12 @@ class Worker:
         entry_ids = {car.name: car.entry_id for car in plan.cars if car.entry_id}
         try:
             recorded = self._retry_db(
-                lambda s: record_result(s, self.storage, holder[0], result, entry_ids) is not None
+                lambda s: (
+                    record_result(
+                        s, self.storage, holder[0], result, entry_ids, self.settings.fault_dnf_limit
+                    )
+                    is not None
+                )
             )
         except StorageError as exc:  # disk full or read-only: a later attempt may succeed
             self._fail(holder[0], f"storage: {exc}", retry=True)
@@ -255,8 +287,8 @@ def spawn(index: int) -> subprocess.Popen:
 def supervise(concurrency: int) -> None:
     """Run ``concurrency`` worker processes; restart any that die; stop them on a signal."""
     stopping = []
-    signal.signal(signal.SIGTERM, lambda *_: stopping.append(True))
-    signal.signal(signal.SIGINT, lambda *_: stopping.append(True))
+    for stop_signal in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
+        signal.signal(stop_signal, lambda *_: stopping.append(True))
     procs = [spawn(i) for i in range(concurrency)]
     backoff = Backoff(cap=30.0)
     while not stopping:

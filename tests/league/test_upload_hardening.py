@@ -125,7 +125,10 @@ def _validation_children() -> list[int]:
     return found
 
 
-def test_a_flood_waits_or_gets_503_and_healthz_answers_meanwhile(league: League) -> None:
+def test_one_racers_flood_gets_429_past_their_share_and_healthz_answers(league: League) -> None:
+    """Eight uploads of one racer at once: their share of the validation slots (two) is
+    validated, the rest refused at once with 429 (never 503: the other racers' slots stay
+    free), and ``/healthz`` answers throughout."""
     files = [wide_mlp(128, seed=300 + i) for i in range(8)]
     statuses: list[int] = []  # every /healthz answer (0: none)
     midflood, stop = [0], threading.Event()  # 200s asked and answered while children ran
@@ -148,9 +151,12 @@ def test_a_flood_waits_or_gets_503_and_healthz_answers_meanwhile(league: League)
     stop.set()
     prober.join()
     codes = sorted(r.status_code for r in answers)
-    assert set(codes) == {201, 503} and codes.count(201) >= 2, codes
-    busy = [r for r in answers if r.status_code == 503]
-    assert all(r.headers["Retry-After"].isdigit() and "busy" in r.text for r in busy)
+    assert set(codes) == {201, 429} and codes.count(201) >= 2, codes
+    refused = [r for r in answers if r.status_code == 429]
+    assert all(
+        r.headers["Retry-After"].isdigit() and "the most one racer may have" in r.text
+        for r in refused
+    )
     assert set(statuses) == {200} and midflood[0] >= 1, (statuses, midflood)
     assert _validation_children() == []
 

@@ -84,7 +84,9 @@ def test_expired_jobs_fail_after_max_attempts_keeping_the_last_error(ops: Ops) -
         assert "gave up after 3 attempts" in job.error and "expired" in job.error
 
 
-def test_hostile_models_fail_with_clear_errors_and_others_finish(ops: Ops) -> None:
+def test_hostile_models_fail_or_lose_their_race_with_clear_errors_and_others_finish(
+    ops: Ops,
+) -> None:
     ev = event(ops, seeds=[0])
     owners = {name: racer(ops, name) for name in ("good", "nan", "hog", "slow")}
     graphs = {"good": None, "nan": nan_onnx(), "hog": memory_onnx(), "slow": slow_onnx()}
@@ -97,12 +99,15 @@ def test_hostile_models_fail_with_clear_errors_and_others_finish(ops: Ops) -> No
         jobs = {j.entry_id: j for j in session.scalars(select(Job))}
         errors = {name: jobs[e.id].error for name, e in entries.items()}
         assert jobs[entries["good"].id].status == "done", errors
-        for name in ("nan", "hog", "slow"):
+        # NaN on race observations costs the car its race (a DNF with the reason), not the job
+        assert jobs[entries["nan"].id].status == "done", errors
+        nan_car = session.scalar(select(RaceCar).where(RaceCar.entry_id == entries["nan"].id))
+        assert nan_car.status == "dnf" and "NaN or inf" in nan_car.dnf_reason
+        for name in ("hog", "slow"):
             assert jobs[entries[name].id].status == "failed", errors
-        assert "NaN or inf" in errors["nan"]
         assert "memory limit of 512 MiB" in errors["hog"]
         assert "CPU-time limit of 3 s" in errors["slow"]
-        assert session.scalar(select(func.count(RaceCar.id))) == 1
+        assert session.scalar(select(func.count(RaceCar.id))) == 2
 
 
 def test_an_idle_worker_finds_nothing(ops: Ops) -> None:

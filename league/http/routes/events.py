@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Annotated
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
+from pydantic import BaseModel
 from sqlalchemy import select
 
 from league import crud
 from league.head_to_head import HeadToHead, head_to_head
 from league.http.auth import AdminRacer, CurrentRacer
-from league.http.deps import SessionDep
+from league.http.deps import SessionDep, SettingsDep
 from league.http.read_cache import Prepared, answer, event_version, prepared
-from league.models import Event, Model, utcnow
+from league.jobs.faults import fault_count
+from league.models import Entry, Event, Model, utcnow
 from league.ranking import leaderboard, standing_row
 from league.schemas import (
     MAX_ID,
@@ -28,6 +31,24 @@ from league.schemas import (
 router = APIRouter(prefix="/api/events", tags=["events"])
 EventId = Annotated[int, Path(ge=1, le=MAX_ID)]
 NOT_FOUND = {404: {"model": ErrorOut, "description": "No such event"}}
+RETRY_AFTER_SECONDS = 60
+
+
+class EntryStatus(BaseModel):
+    """One of your entries in an event: whether it still races, and if not, why.
+
+    ``fault_dnfs`` counts the event's races it was taken out of for model faults (NaN or
+    inf outputs, steps over the CPU budget); at the league's limit the entry is suspended
+    and ``suspension`` says why."""
+
+    entry_id: int
+    event_id: int
+    model_id: int
+    created_at: datetime
+    fault_dnfs: int
+    suspended: bool
+    suspended_at: datetime | None
+    suspension: str | None
 
 
 def event_out(event: Event) -> EventOut:
@@ -74,23 +95,72 @@ def read_event(event_id: EventId, session: SessionDep) -> EventOut:
     "/{event_id}/entries",
     status_code=202,
     response_model=EntryAccepted,
-    responses={**NOT_FOUND, 409: {"model": ErrorOut, "description": "Closed or entered"}},
+    responses={
+        **NOT_FOUND,
+        409: {"model": ErrorOut, "description": "Closed, entered, or at the entries cap"},
+        429: {"model": ErrorOut, "description": "Too many of your jobs are waiting"},
+    },
 )
 def enter_event(
-    event_id: EventId, body: EntryCreate, racer: CurrentRacer, session: SessionDep
+    event_id: EventId,
+    body: EntryCreate,
+    racer: CurrentRacer,
+    session: SessionDep,
+    settings: SettingsDep,
 ) -> EntryAccepted:
-    """Enter one of your models; evaluation jobs are queued (one per seed of the event)."""
+    """Enter one of your models; evaluation jobs are queued (one per seed of the event).
+
+    A racer may have ``max_entries_per_racer`` entries in an event (409 past it) and
+    ``max_queued_jobs_per_racer`` evaluation jobs waiting or running (429 with Retry-After
+    when the entry's jobs would pass it)."""
     event = get_event(session, event_id)
     model = session.get(Model, body.model_id)
     if model is None or model.owner_id != racer.id:
         raise HTTPException(404, f"Model {body.model_id} is not one of your models.")
     try:
-        entry, jobs = crud.enter_model(session, event, model, utcnow())
+        entry, jobs = crud.enter_model(
+            session,
+            event,
+            model,
+            utcnow(),
+            max_entries=settings.max_entries_per_racer,
+            max_queued=settings.max_queued_jobs_per_racer,
+        )
+    except crud.QueueFull as exc:
+        headers = {"Retry-After": str(RETRY_AFTER_SECONDS)}
+        raise HTTPException(429, str(exc), headers=headers) from None
     except crud.Conflict as exc:
         raise HTTPException(409, str(exc)) from None
     return EntryAccepted(
         entry_id=entry.id, event_id=event.id, model_id=model.id, job_ids=[j.id for j in jobs]
     )
+
+
+@router.get("/{event_id}/entries", response_model=list[EntryStatus], responses=NOT_FOUND)
+def read_my_entries(
+    event_id: EventId, racer: CurrentRacer, session: SessionDep
+) -> list[EntryStatus]:
+    """Your entries in the event, oldest first: fault DNFs and whether each is suspended
+    (with the reason) after breaking too many of the event's races."""
+    event = get_event(session, event_id)
+    query = (
+        select(Entry)
+        .where(Entry.event_id == event.id, Entry.racer_id == racer.id)
+        .order_by(Entry.id)
+    )
+    return [
+        EntryStatus(
+            entry_id=e.id,
+            event_id=e.event_id,
+            model_id=e.model_id,
+            created_at=e.created_at,
+            fault_dnfs=fault_count(session, e.id),
+            suspended=e.suspended_at is not None,
+            suspended_at=e.suspended_at,
+            suspension=e.suspension,
+        )
+        for e in session.scalars(query)
+    ]
 
 
 @router.get("/{event_id}/head-to-head", response_model=list[HeadToHead], responses=NOT_FOUND)

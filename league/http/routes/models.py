@@ -24,7 +24,12 @@ from sqlalchemy import select
 from league import crud
 from league.http.auth import CurrentRacer, OptionalRacer
 from league.http.deps import SessionDep, SettingsDep, StorageDep
-from league.http.upload_validation import RETRY_AFTER_SECONDS, UploadValidator, ValidationBusy
+from league.http.upload_validation import (
+    RETRY_AFTER_SECONDS,
+    RacerUploadLimit,
+    UploadValidator,
+    ValidationBusy,
+)
 from league.models import Model, Racer
 from league.schemas import MAX_ID, ErrorOut, ModelName, ModelOut
 
@@ -71,6 +76,7 @@ def _upload_validator(request: Request) -> UploadValidator:
         200: {"model": ModelOut, "description": "The same file was uploaded before"},
         413: {"model": ErrorOut, "description": "File too large"},
         422: {"model": ErrorOut, "description": "The validator's problems"},
+        429: {"model": ErrorOut, "description": "Your other uploads are still being validated"},
         503: {"model": ErrorOut, "description": "Validation is busy; retry after Retry-After s"},
     },
 )
@@ -85,10 +91,11 @@ async def upload_model(
     name: Annotated[str | None, Form(description="Display name; default: the file name")] = None,
 ) -> ModelOut | JSONResponse:
     """Upload a model. It is validated in a child process (a few at once: 503 with
-    Retry-After when all are busy); the same file twice gives the same model (200)."""
+    Retry-After when all are busy, 429 when you already have as many uploads validating or
+    waiting as one racer may); the same file twice gives the same model (200)."""
     model_name = _name(name, file.filename)
     try:
-        async with validator.slot():
+        async with validator.slot(racer.id):
             data = await file.read(settings.max_upload_bytes + 1)
             if len(data) > settings.max_upload_bytes:
                 limit = settings.max_upload_bytes
@@ -96,7 +103,8 @@ async def upload_model(
             report = await validator.validate(data)
     except ValidationBusy as exc:
         headers = {"Retry-After": str(RETRY_AFTER_SECONDS)}
-        raise HTTPException(503, f"{exc} Try again later.", headers=headers) from None
+        status = 429 if isinstance(exc, RacerUploadLimit) else 503
+        raise HTTPException(status, f"{exc} Try again later.", headers=headers) from None
     if not report.ok or report.info is None:
         count = len(report.problems)
         return JSONResponse(
