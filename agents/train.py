@@ -57,20 +57,43 @@ def _rank() -> int:
     return int(os.getenv("RANK", "0"))
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""What stops training: Ctrl-C, ``kill`` / systemd / a container stop, a closed terminal."""
+
+
+@contextmanager
+def _stop_signals_interrupt() -> Iterator[None]:
+    """In the block, SIGTERM and SIGHUP raise KeyboardInterrupt as Ctrl-C does, so training
+    stops the same way (checkpoint written, workers closed); restored afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.signal(sig, signal.default_int_handler) for sig in STOP_SIGNALS[1:]}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 @contextmanager
 def _sigint_deferred() -> Iterator[None]:
-    """Hold a Ctrl-C (SIGINT) that arrives in the block until the block has run."""
+    """Hold a stop signal (Ctrl-C, SIGTERM, SIGHUP) that arrives in the block until the
+    block has run."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    previous = {
+        sig: signal.signal(sig, lambda signum, frame: caught.append(signum)) for sig in STOP_SIGNALS
+    }
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught and callable(previous):
-        previous(signal.SIGINT, None)  # Python's default handler raises KeyboardInterrupt
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if caught and callable(handler := previous[caught[0]]):
+        handler(caught[0], None)  # Python's default SIGINT handler raises KeyboardInterrupt
 
 
 class Trainer:
@@ -210,7 +233,8 @@ class Trainer:
 
     # ------------------------------------------------------------------- loop
     def run(self, on_iteration: Callable[[IterationStats], None] | None = None) -> TrainResult:
-        """Train until the iteration or time budget is spent (or Ctrl-C); write outputs.
+        """Train until the iteration or time budget is spent (or Ctrl-C, SIGTERM, SIGHUP);
+        write outputs.
 
         ``on_iteration`` receives each finished iteration's statistics.
         """
@@ -218,16 +242,17 @@ class Trainer:
         torch.manual_seed(self.settings.seed + _rank())
         if self.writes_run_folder:
             self.target.write()
-        env, pool = self._make_env()
-        result = TrainResult(self.run_dir)
-        try:
-            runner = self._make_runner(env)
-            self._load_weights(runner)
-            if pool is not None:
-                pool.add_snapshot("snapshot:start", self._graph(runner))
-            self._loop(runner, env, pool, result, on_iteration)
-        finally:
-            env.close()
+        with _stop_signals_interrupt():
+            env, pool = self._make_env()
+            result = TrainResult(self.run_dir)
+            try:
+                runner = self._make_runner(env)
+                self._load_weights(runner)
+                if pool is not None:
+                    pool.add_snapshot("snapshot:start", self._graph(runner))
+                self._loop(runner, env, pool, result, on_iteration)
+            finally:
+                env.close()
         if self.writes_run_folder and checkpoint_path(self.run_dir).exists():
             result.model_zip = self._package()
         return result

@@ -297,8 +297,14 @@ class EnvGroup:
             env.close()
 
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""Signals the trainer handles (as Ctrl-C) and workers ignore: the trainer closes them,
+and a worker whose trainer is gone exits when its pipe closes."""
+
+
 def _worker(conn: Any, kwargs: dict[str, Any]) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the trainer handles Ctrl-C
+    for sig in STOP_SIGNALS:  # the trainer handles them and closes this worker
+        signal.signal(sig, signal.SIG_IGN)
     try:
         group = EnvGroup(**kwargs)
         conn.send(("ok", None))
@@ -399,11 +405,12 @@ class RacingVecEnv(VecEnv):
 
     # ---------------------------------------------------------------- workers
     def _start_workers(self, kwargs: list[dict[str, Any]]) -> None:
-        """Spawn the workers with SIGINT ignored (inherited through exec, so a Ctrl-C
-        while they import cannot kill them); the trainer handles Ctrl-C and closes them."""
+        """Spawn the workers with the stop signals ignored (inherited through exec, so a
+        Ctrl-C, SIGTERM or SIGHUP to the process group while they import cannot kill them);
+        the trainer handles those signals and closes them."""
         ctx = mp.get_context("spawn")
         main = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+        previous = {s: signal.signal(s, signal.SIG_IGN) for s in STOP_SIGNALS} if main else None
         try:
             for kw in kwargs:
                 parent, child = ctx.Pipe()
@@ -413,8 +420,8 @@ class RacingVecEnv(VecEnv):
                 self._conns.append(parent)
                 self._procs.append(proc)
         finally:
-            if previous is not None:
-                signal.signal(signal.SIGINT, previous)
+            for sig, handler in (previous or {}).items():
+                signal.signal(sig, handler)
         for conn in self._conns:
             self._receive(conn)
 
@@ -517,7 +524,7 @@ class RacingVecEnv(VecEnv):
         for proc in self._procs:
             proc.join(timeout=5)
             if proc.is_alive():
-                proc.terminate()
+                proc.kill()  # it ignores SIGTERM
                 proc.join(timeout=5)
         self._conns, self._procs = [], []
 

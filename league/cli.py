@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -13,6 +15,7 @@ from rich.table import Table
 from rich.text import Text
 
 if TYPE_CHECKING:
+    import uvicorn
     from sqlalchemy.orm import Session
 
     from league.settings import Settings
@@ -71,10 +74,9 @@ def serve(
     """
     import os
 
-    import uvicorn
-
     from league.db import make_engine
     from league.http.app import create_app
+    from league.http.server_options import server_config
     from league.migrations import upgrade
 
     settings = _settings(data_dir)
@@ -84,11 +86,42 @@ def serve(
     engine.dispose()
     options = {"host": host, "port": port, "log_level": "info", "access_log": access_log}
     if workers == 1:
-        uvicorn.run(create_app(settings), **options)
+        _run_server(server_config(create_app(settings), settings, **options))
         return
     if data_dir is not None:
         os.environ["SLIPSTREAM_DATA_DIR"] = str(data_dir.resolve())
-    uvicorn.run("league.http.app:create_app", factory=True, workers=workers, **options)
+    app_factory = "league.http.app:create_app"
+    _run_server(server_config(app_factory, settings, factory=True, workers=workers, **options))
+
+
+def hangup_as_terminate() -> None:
+    """Make SIGHUP (a closed terminal, ``kill -HUP``) stop this process as SIGTERM does.
+
+    Every long-running league command stops its children and itself gracefully on SIGTERM,
+    as on Ctrl-C; this extends that to SIGHUP, whose default would kill the process alone.
+    """
+    signal.signal(signal.SIGHUP, lambda *_: signal.raise_signal(signal.SIGTERM))
+
+
+def _run_server(config: uvicorn.Config) -> None:
+    """Serve ``config`` until SIGINT, SIGTERM or SIGHUP (uvicorn's ``run``, except that
+    SIGHUP stops ``--workers`` processes instead of restarting them)."""
+    import uvicorn
+    from uvicorn.supervisors import Multiprocess
+
+    class StopOnHangup(Multiprocess):
+        def handle_hup(self) -> None:
+            self.handle_term()
+
+    hangup_as_terminate()
+    if config.workers > 1:
+        StopOnHangup(config, sockets=[config.bind_socket()]).run()
+        return
+    server = uvicorn.Server(config)
+    with contextlib.suppress(KeyboardInterrupt):
+        server.run()
+    if not server.started:
+        raise typer.Exit(3)  # uvicorn's exit status when a server fails to start
 
 
 @app.command("create-racer")
@@ -274,6 +307,7 @@ def scheduler(data_dir: DataDir = None) -> None:
     settings = _settings(data_dir)
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     upgrade(make_engine(settings.db_url, settings.sqlite_busy_timeout_ms))
+    hangup_as_terminate()
     Scheduler(settings).run_forever()
 
 
@@ -291,6 +325,7 @@ def worker(
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     if data_dir is not None:
         os.environ["SLIPSTREAM_DATA_DIR"] = str(data_dir)
+    hangup_as_terminate()
     supervise(concurrency)
 
 

@@ -6,7 +6,8 @@
 3. Starts the server, the scheduler and a worker as child processes, uploads the
    bundled sample models through the API and enters them in every event.
 4. Shows progress while the first evaluations run, prints each leaderboard, and keeps
-   serving (URL printed) until Ctrl-C, which stops every child process.
+   serving (URL printed) until Ctrl-C, SIGTERM or SIGHUP, any of which stops every child
+   process, then the demo.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import signal
 import subprocess
 import sys
 import time
-from contextlib import ExitStack
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from importlib import resources
 from pathlib import Path
 
@@ -119,7 +121,39 @@ def _start(name: str, args: list[str], env: dict[str, str], logs: Path) -> subpr
     )
 
 
+@contextmanager
+def _stop_signals_interrupt() -> Iterator[None]:
+    """In the block, SIGTERM (``kill``, systemd, a container stop) and SIGHUP (a closed
+    terminal) raise KeyboardInterrupt as Ctrl-C does, so the children are stopped the same
+    way; the previous handlers come back afterwards."""
+    stop_signals = (signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, signal.default_int_handler) for sig in stop_signals}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def _stop(processes: list[subprocess.Popen], console: Console) -> None:
+    """SIGTERM to each child, up to 15 s for them all to exit, then SIGKILL to the rest
+    (and their process groups); no signal interrupts this."""
+    with _signals_ignored():
+        _stop_children(processes, console)
+
+
+@contextmanager
+def _signals_ignored() -> Iterator[None]:
+    stop_signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in stop_signals}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _stop_children(processes: list[subprocess.Popen], console: Console) -> None:
     for process in processes:
         if process.poll() is None:
             process.send_signal(signal.SIGTERM)
@@ -211,7 +245,7 @@ def run_demo(
     }
     url = f"http://127.0.0.1:{port}"
     processes: list[subprocess.Popen] = []
-    with ExitStack() as stack:
+    with _stop_signals_interrupt(), ExitStack() as stack:
         stack.callback(_stop, processes, console)
         processes.append(_start("server", ["serve", "--port", str(port)], env, logs))
         processes.append(_start("worker", ["worker", "--concurrency", "1"], env, logs))
@@ -236,4 +270,4 @@ def run_demo(
                 while all(p.poll() is None for p in processes):
                     time.sleep(0.5)
             except KeyboardInterrupt:
-                console.print("\nCtrl-C: stopping")
+                console.print("\nCtrl-C, SIGTERM or SIGHUP: stopping")

@@ -74,6 +74,62 @@ class Settings(BaseSettings):
         ge=0.0,
         description="Temp and unreferenced files younger than this survive the start-up sweep.",
     )
+    # Races judge models (issue 34, rows 3-5 and 9): see docs/league-api.md.
+    race_step_budget_ms: float | None = Field(
+        default=None,
+        gt=0.0,
+        description="CPU time a model's step may take in a race; default: the validator's "
+        "per-step cap. A model whose fastest of race_step_window steps is over it is out "
+        "of the race.",
+    )
+    race_step_window: int = Field(
+        default=10, ge=1, description="Steps the race step budget is judged over."
+    )
+    fault_dnf_limit: int = Field(
+        default=3,
+        ge=1,
+        description="DNFs for model faults (NaN/inf, too slow) in one event that suspend an "
+        "entry from it.",
+    )
+    max_entries_per_racer: int = Field(
+        default=5, ge=1, description="Entries one racer may have in one event."
+    )
+    max_queued_jobs_per_racer: int = Field(
+        default=100,
+        ge=1,
+        description="Evaluation jobs one racer may have queued or running; an entry that "
+        "would pass it is refused (429).",
+    )
+    validation_per_racer: int = Field(
+        default=2,
+        ge=1,
+        description="Uploads of one racer being validated or waiting for a slot; more get 503.",
+    )
+    # What one connection may cost (issue 34, rows 1 and 6): see docs/deploy.md.
+    max_header_bytes: int = Field(
+        default=32 * 1024,
+        ge=1024,
+        description="Request line and header fields of one request; more get 431 and the "
+        "connection is closed.",
+    )
+    max_header_count: int = Field(
+        default=100, ge=8, description="Header fields of one request; more get 431."
+    )
+    header_timeout_seconds: float = Field(
+        default=10.0,
+        gt=0.0,
+        description="Time a request's line and headers may take to arrive, counted from the "
+        "connection's start or the head's first byte; then 408 (or, idle, just closed).",
+    )
+    keep_alive_seconds: float = Field(
+        default=5.0, gt=0.0, description="Idle time of a connection between two requests."
+    )
+    max_connections: int = Field(
+        default=1000,
+        ge=1,
+        description="Open connections (and requests in progress) of one server process; a "
+        "request beyond it gets 503. Keep the open-files limit (LimitNOFILE) well above it.",
+    )
 
     @property
     def db_url(self) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -123,6 +124,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.session_factory = make_session_factory(engine)
     app.state.storage = open_storage(settings)
     app.state.read_cache = ReadCache()  # public reads, per results version
+    app.state.list_builds = asyncio.Semaphore(1)  # uncached race lists: one at a time
     app.state.upload_validator = UploadValidator(settings)
     for module in (health, racers, models, events, jobs, races, tracks, web_model_data):
         app.include_router(module.router)

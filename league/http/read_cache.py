@@ -10,6 +10,7 @@ body was built at that version, answers it, or ``304 Not Modified`` when the cli
 
 from __future__ import annotations
 
+import asyncio
 import gzip
 import hashlib
 import threading
@@ -91,11 +92,21 @@ class ReadCache:
 
 
 async def prepared(
-    request: Request, key: Hashable, build: Callable[[], Prepared | None]
+    request: Request,
+    key: Hashable,
+    build: Callable[[], Prepared | None],
+    gate: asyncio.Semaphore | None = None,
 ) -> Prepared | None:
-    """The cached answer for ``key``, else ``build()`` run in the thread pool and stored."""
+    """The cached answer for ``key``, else ``build()`` run in the thread pool and stored.
+
+    With a ``gate``, builds wait for it (a request that waited may then find its answer
+    built), so queries whose parameters each miss the cache take at most that many threads.
+    """
     cache: ReadCache = request.app.state.read_cache
     item = cache.get(key)
+    if item is None and gate is not None:
+        async with gate:
+            return await prepared(request, key, build)
     if item is None:
         item = await run_in_threadpool(build)
         if item is not None:
@@ -138,12 +149,26 @@ def gzip_prepared(data: bytes, media_type: str, etag: str) -> Prepared:
     return Prepared(gzip.compress(data, 6, mtime=0), media_type, etag, gzipped=True)
 
 
-def answer_gzipped(request: Request, item: Prepared, cache_control: str = IMMUTABLE) -> Response:
-    """A gzip-stored ``item``: its bytes to clients that accept gzip, inflated for others.
+def inflated(item: Prepared) -> Prepared:
+    """The identity copy of a gzip-stored ``item``: its bytes inflated, the same ETag."""
+    return Prepared(gzip.decompress(item.body), item.media_type, item.etag)
+
+
+async def answer_gzipped(
+    request: Request,
+    key: Hashable,
+    build: Callable[[], Prepared],
+    cache_control: str = IMMUTABLE,
+) -> Response:
+    """A body kept gzip-compressed (``build`` makes it, e.g. with :func:`gzip_prepared`):
+    its bytes to clients that accept gzip; for the others its inflated copy, made in the
+    thread pool once and cached beside it (never inflated on the event loop).
 
     The two encodings carry different strong tags (``"sha"`` and ``"sha.gz"``); either one
     in ``If-None-Match`` answers 304.
     """
+    item = await prepared(request, key, build)
+    assert item is not None
     gz = accepts_gzip(request)
     etag = item.etag[:-1] + '.gz"' if gz else item.etag
     headers = {"ETag": etag, "Cache-Control": cache_control, "Vary": "Accept-Encoding"}
@@ -152,7 +177,9 @@ def answer_gzipped(request: Request, item: Prepared, cache_control: str = IMMUTA
     if gz:
         headers["Content-Encoding"] = "gzip"
         return Response(item.body, media_type=item.media_type, headers=headers)
-    return Response(gzip.decompress(item.body), media_type=item.media_type, headers=headers)
+    plain = await prepared(request, ("identity", key), lambda: inflated(item))
+    assert plain is not None
+    return Response(plain.body, media_type=plain.media_type, headers=headers)
 
 
 def _engine(request: Request) -> Engine:

@@ -19,6 +19,7 @@ import httpx
 import numpy as np
 import pytest
 import uvicorn
+from fastapi import FastAPI
 from onnx import TensorProto, helper, numpy_helper
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -26,6 +27,7 @@ from arena.actions import default_discrete_space
 from league import crud
 from league.db import make_engine, make_session_factory, scratch_schema
 from league.http.app import create_app
+from league.http.server_options import server_config
 from league.migrations import upgrade
 from league.settings import Settings
 from league.store.local import LocalFileStore
@@ -77,10 +79,12 @@ def free_port() -> int:
 
 
 class ServerThread:
-    """uvicorn serving an app in a background thread."""
+    """uvicorn serving a league app in a background thread, configured as ``league serve``
+    configures it (:func:`league.http.server_options.server_config`)."""
 
-    def __init__(self, app: object, port: int) -> None:
-        config = uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning")
+    def __init__(self, app: FastAPI, port: int) -> None:
+        settings = app.state.settings
+        config = server_config(app, settings, host="127.0.0.1", port=port, log_level="warning")
         self.server = uvicorn.Server(config)
         self.thread = threading.Thread(target=self.server.run, daemon=True)
         self.url = f"http://127.0.0.1:{port}"

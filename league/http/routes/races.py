@@ -27,6 +27,8 @@ router = APIRouter(prefix="/api/races", tags=["races"])
 RaceId = Annotated[int, Path(ge=1, le=MAX_ID)]
 NOT_FOUND = {404: {"model": ErrorOut, "description": "No such race"}}
 RACE_LIST = TypeAdapter(list[RaceBrief])
+MAX_LIMIT = 500
+MAX_OFFSET = 1000  # deeper pages by keyset (``before``): each offset is a query of its own
 
 
 def _aliases(session: Session, races: list[Race]) -> dict[int, str]:
@@ -57,10 +59,14 @@ def _brief(race: Race, aliases: dict[int, str]) -> dict:
     }
 
 
-def _race_list(request: Request, event: int | None, limit: int, offset: int) -> Prepared:
+def _race_list(
+    request: Request, event: int | None, before: int | None, limit: int, offset: int
+) -> Prepared:
     query = select(Race).options(selectinload(Race.cars)).order_by(Race.id.desc())
     if event is not None:
         query = query.where(Race.event_id == event)
+    if before is not None:
+        query = query.where(Race.id < before)
     with request.app.state.session_factory() as session:
         races = list(session.scalars(query.limit(limit).offset(offset)))
         aliases = _aliases(session, races)
@@ -72,13 +78,26 @@ def _race_list(request: Request, event: int | None, limit: int, offset: int) -> 
 async def list_races(
     request: Request,
     event: Annotated[int | None, Query(ge=1, le=MAX_ID, description="Only this event")] = None,
-    limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
+    before: Annotated[
+        int | None,
+        Query(
+            ge=1,
+            le=MAX_ID,
+            description="Only races with a smaller id: to page on, the "
+            "last id of the previous page",
+        ),
+    ] = None,
+    limit: Annotated[int, Query(ge=1, le=MAX_LIMIT)] = 50,
+    offset: Annotated[
+        int, Query(ge=0, le=MAX_OFFSET, description="Races to skip; further back, use before")
+    ] = 0,
 ) -> Response:
-    """Races, newest first, with each car's result (ETag; built once per results version)."""
+    """Races, newest first, with each car's result (ETag; built once per results version).
+    Page with ``before`` (the last id of the previous page): ``offset`` stops at 1000."""
     version: object = league_version(request) if event is None else event_version(request, event)
-    key = ("races", event, limit, offset, version)
-    item = await prepared(request, key, lambda: _race_list(request, event, limit, offset))
+    key = ("races", event, before, limit, offset, version)
+    build = lambda: _race_list(request, event, before, limit, offset)  # noqa: E731
+    item = await prepared(request, key, build, request.app.state.list_builds)
     assert item is not None
     return answer(request, item)
 
@@ -144,6 +163,6 @@ async def read_trace(race_id: RaceId, request: Request) -> Response:
     _, _, sha256 = _found(request, race_id)
     if sha256 is None:
         raise HTTPException(404, f"Race {race_id} has no trace.")
-    item = await prepared(request, ("trace", sha256), lambda: _trace(request, race_id, sha256))
-    assert item is not None
-    return answer_gzipped(request, item)
+    return await answer_gzipped(
+        request, ("trace", sha256), lambda: _trace(request, race_id, sha256)
+    )
