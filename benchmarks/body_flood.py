@@ -25,7 +25,14 @@ import tempfile
 import threading
 import time
 
-from harness import ResultTable, add_record_option, rss_kib, start_league, write
+from harness import (
+    ResultTable,
+    add_record_option,
+    healthz_seconds,
+    rss_kib,
+    start_league,
+    write,
+)
 
 PATH = "/api/events/1/entries"
 CHUNK = 1024 * 1024
@@ -67,14 +74,6 @@ def load(port: int, clients: int, megabytes: int) -> None:
     for thread in threads:
         thread.join()
     print(json.dumps(results))
-
-
-def healthz_seconds(port: int) -> float:
-    start = time.monotonic()
-    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
-        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
-        sock.recv(64)
-    return time.monotonic() - start
 
 
 def measure(clients: int, megabytes: int, record: bool) -> None:

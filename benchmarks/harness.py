@@ -83,6 +83,15 @@ def rss_kib(pid: int) -> int:
     return int(resident.split()[0]) if resident else 0
 
 
+def healthz_seconds(port: int) -> float:
+    """How long ``GET /healthz`` takes on a fresh raw connection (no client library)."""
+    start = time.monotonic()
+    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
+        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+        sock.recv(64)
+    return time.monotonic() - start
+
+
 def free_port() -> int:
     """A loopback port nothing listens on now."""
     with socket.socket() as sock:

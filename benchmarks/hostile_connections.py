@@ -32,7 +32,14 @@ import threading
 import time
 from pathlib import Path
 
-from harness import ResultTable, add_record_option, rss_kib, start_league, write
+from harness import (
+    ResultTable,
+    add_record_option,
+    healthz_seconds,
+    rss_kib,
+    start_league,
+    write,
+)
 
 MB = 1_000_000
 HELD_CONNECTIONS = 5
@@ -153,14 +160,6 @@ def load(args: argparse.Namespace) -> None:
 
 
 # --------------------------------------------------------------------------- measuring
-def healthz_seconds(port: int) -> float:
-    start = time.monotonic()
-    with socket.create_connection(("127.0.0.1", port), timeout=60) as sock:
-        sock.sendall(b"GET /healthz HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
-        sock.recv(64)
-    return time.monotonic() - start
-
-
 def attack(name: str, port: int, pid: int, args: argparse.Namespace) -> tuple[dict, float, float]:
     """Run attack ``name`` in its own process; what it saw, peak RSS growth (MB), worst
     ``/healthz`` (s) meanwhile."""
