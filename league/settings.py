@@ -103,9 +103,9 @@ class Settings(BaseSettings):
     validation_per_racer: int = Field(
         default=2,
         ge=1,
-        description="Uploads of one racer being validated or waiting for a slot; more get 503.",
+        description="Uploads of one racer being validated or waiting for a slot; more get 429.",
     )
-    # What one connection may cost (issue 34, rows 1 and 6): see docs/deploy.md.
+    # What one connection may cost: see docs/deploy.md ("Connections").
     max_header_bytes: int = Field(
         default=32 * 1024,
         ge=1024,
