@@ -74,7 +74,7 @@ class Settings(BaseSettings):
         ge=0.0,
         description="Temp and unreferenced files younger than this survive the start-up sweep.",
     )
-    # Races judge models (issue 34, rows 3-5 and 9): see docs/league-api.md.
+    # How races judge models, and each racer's share of the queue: see docs/league-api.md.
     race_step_budget_ms: float | None = Field(
         default=None,
         gt=0.0,
