@@ -170,20 +170,31 @@ def segments_intersect(
     return crossing & (~collinear | overlap)
 
 
+SELF_INTERSECTION_BLOCK = 256  # segments checked at once: memory stays O(block x n), not O(n^2)
+
+
 def first_self_intersection(vertices: np.ndarray, closed: bool) -> tuple[int, int] | None:
-    """Return the first pair of non-adjacent segments of a polyline that cross, if any."""
+    """Return the first pair of non-adjacent segments of a polyline that cross, if any.
+
+    "First" is the smallest ``i``, then the smallest ``j > i + 1``. Checked a block of rows
+    at a time, so a long polyline costs time but never a quadratic array.
+    """
     a = vertices[:-1]
     b = vertices[1:]
     n = len(a)
-    hit = segments_intersect(a[:, None], b[:, None], a[None, :], b[None, :])
-    i, j = np.triu_indices(n, k=2)
-    mask = hit[i, j]
-    if closed:
-        mask &= ~((i == 0) & (j == n - 1))
-    if not mask.any():
-        return None
-    k = int(np.argmax(mask))
-    return int(i[k]), int(j[k])
+    for start in range(0, n, SELF_INTERSECTION_BLOCK):
+        rows = np.arange(start, min(start + SELF_INTERSECTION_BLOCK, n))
+        cols = np.arange(start + 2, n)
+        if not len(cols):
+            break
+        hit = segments_intersect(a[rows, None], b[rows, None], a[None, cols], b[None, cols])
+        hit &= cols[None, :] >= rows[:, None] + 2
+        if closed:
+            hit &= ~((rows[:, None] == 0) & (cols[None, :] == n - 1))
+        if hit.any():
+            r, c = np.unravel_index(int(np.argmax(hit)), hit.shape)
+            return int(rows[r]), int(cols[c])
+    return None
 
 
 def signed_area(ring: np.ndarray) -> float:
