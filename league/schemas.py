@@ -233,7 +233,8 @@ class Leaderboard(BaseModel):
 # ------------------------------------------------------------------ races
 class RaceCarOut(_Out):
     """One car's result with lap splits and racing metrics (``gap_to_winner_ms``: 0 for the
-    winner, null for a car that did not finish)."""
+    winner, null for a car that did not finish; ``dnf_reason``: why a model fault took the
+    car out of the race, null otherwise)."""
 
     car_name: str
     alias: str | None = None
@@ -256,6 +257,7 @@ class RaceCarOut(_Out):
     at_fault_collisions: int
     laps_led: int
     gap_to_winner_ms: int | None
+    dnf_reason: str | None = None
 
 
 class RaceBrief(_Out):

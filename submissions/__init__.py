@@ -7,7 +7,7 @@ unpickled or executed; the policy graph runs on onnxruntime's allowlisted operat
 from submissions.format import FORMAT_VERSION, InputSpec, Limits, Problem
 from submissions.pack import pack
 from submissions.policy import OnnxPolicy, load_policy
-from submissions.runner import NonFiniteOutput, NonFiniteRule, OnnxRunner
+from submissions.runner import ModelFault, NonFiniteOutput, NonFiniteRule, OnnxRunner
 from submissions.validator import InvalidSubmission, ModelInfo, ValidationReport, validate
 
 __all__ = [
@@ -15,6 +15,7 @@ __all__ = [
     "InputSpec",
     "InvalidSubmission",
     "Limits",
+    "ModelFault",
     "ModelInfo",
     "NonFiniteOutput",
     "NonFiniteRule",

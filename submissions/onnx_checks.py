@@ -331,13 +331,14 @@ def check_graph(policy: bytes, checked: CheckedMetadata, limits: Limits) -> list
 
 def open_session(policy: bytes, intra_op_threads: int = 1) -> ort.InferenceSession:
     """An onnxruntime CPU session for a policy: sequential, ``intra_op_threads`` threads,
-    all graph optimisations on."""
+    all graph optimisations on, quiet but for fatal errors (a failed run raises, and the
+    caller reports it once)."""
     options = ort.SessionOptions()
     options.intra_op_num_threads = intra_op_threads
     options.inter_op_num_threads = 1
     options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     options.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_ALL
-    options.log_severity_level = 3
+    options.log_severity_level = 4
     return ort.InferenceSession(policy, sess_options=options, providers=["CPUExecutionProvider"])
 
 

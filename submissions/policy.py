@@ -37,7 +37,10 @@ class OnnxPolicy(OnnxRunner):
         name: str = "policy",
     ) -> None:
         discrete = isinstance(info.action_space, DiscreteActionSpace)
-        super().__init__(session, info.observation, discrete, non_finite=non_finite, name=name)
+        width = info.action_space.n if discrete else 2
+        super().__init__(
+            session, info.observation, discrete, non_finite=non_finite, name=name, width=width
+        )
         self.info = info
 
 

@@ -10,6 +10,7 @@ output is the caller's explicit choice, :data:`NonFiniteRule`.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from typing import Any, Literal
 
@@ -23,8 +24,27 @@ NonFiniteRule = Literal["zero", "raise"]
 NON_FINITE_RULES: tuple[NonFiniteRule, ...] = ("zero", "raise")
 
 
-class NonFiniteOutput(ValueError):
+class ModelFault(RuntimeError):
+    """A policy graph failed on an observation: onnxruntime could not run it, or its
+    output is not the ``(batch, width)`` the model declares."""
+
+
+class NonFiniteOutput(ModelFault, ValueError):
     """A policy graph output NaN or inf under the ``"raise"`` rule."""
+
+
+_ORT_PREFIX = re.compile(r"^\[ONNXRuntimeError\] : \d+ : \w+ : ")
+_ORT_NODE = re.compile(r"while running (\w+) node")
+_ORT_SOURCE = re.compile(r"^/\S+:\d+ (?:[^()]*\([^()]*\)\s*(?:const\s*)?)?")
+
+
+def _ort_reason(error: Exception) -> str:
+    """What an onnxruntime error says, without its status code, source path or C++
+    function: ``" in a Reshape node: The input tensor cannot be reshaped ..."``."""
+    text = _ORT_PREFIX.sub("", " ".join(str(error).split())) or type(error).__name__
+    node = _ORT_NODE.search(text)
+    message = _ORT_SOURCE.sub("", text.rsplit("Status Message: ", 1)[-1])
+    return (f" in a {node.group(1)} node" if node else "") + f": {message[:300]}"
 
 
 def graph_inputs(session: ort.InferenceSession) -> list[InputSpec]:
@@ -52,8 +72,12 @@ class OnnxRunner:
             and drives on; ``"raise"`` raises :class:`NonFiniteOutput`, naming ``name``
             and the run that produced it.
         name: how errors name the driver (e.g. ``"car entry7"``).
+        width: the output's declared width (the number of discrete actions, or 2); an
+            output of another shape raises :class:`ModelFault`. ``None``: not checked.
 
-    The runner is stateless, so ``reset`` does nothing.
+    onnxruntime failing on an observation raises :class:`ModelFault` too, so a race can
+    retire the car (:class:`arena.race.StepGuard`) instead of failing. The runner is
+    stateless, so ``reset`` does nothing.
     """
 
     def __init__(
@@ -64,6 +88,7 @@ class OnnxRunner:
         *,
         non_finite: NonFiniteRule = "zero",
         name: str = "policy",
+        width: int | None = None,
     ) -> None:
         if non_finite not in NON_FINITE_RULES:
             raise ValueError(f"non_finite must be one of {NON_FINITE_RULES}, got {non_finite!r}")
@@ -71,6 +96,7 @@ class OnnxRunner:
         self.discrete = discrete
         self.non_finite = non_finite
         self.name = name
+        self.width = width
         self.runs = 0
         self._dtypes = {s.name: np.dtype(s.dtype) for s in inputs}
         self._shapes = {s.name: s.shape for s in inputs}
@@ -100,9 +126,19 @@ class OnnxRunner:
 
     def _run(self, feeds: dict[str, np.ndarray]) -> np.ndarray:
         """The graph's output for ``feeds`` as float32, the non-finite rule applied."""
-        (raw,) = self.session.run(None, feeds)
         self.runs += 1
-        raw = np.asarray(raw, dtype=np.float32)
+        try:
+            raw = np.asarray(self.session.run(None, feeds)[0], dtype=np.float32)
+        except Exception as error:  # onnxruntime's errors share no base class but Exception
+            raise ModelFault(
+                f"{self.name}: onnxruntime failed at step {self.runs}{_ort_reason(error)}"
+            ) from error
+        batch = len(next(iter(feeds.values()))) if feeds else 1
+        if raw.ndim != 2 or raw.shape[0] != batch or raw.shape[1] != (self.width or raw.shape[1]):
+            want = f"({batch}, {self.width or 'n'})"
+            raise ModelFault(
+                f"{self.name}: the model output shape {raw.shape} at step {self.runs}, not {want}"
+            )
         if self.non_finite == "raise" and not np.all(np.isfinite(raw)):
             raise NonFiniteOutput(f"{self.name}: the model output NaN or inf at step {self.runs}")
         return raw

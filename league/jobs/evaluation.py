@@ -48,11 +48,12 @@ class RacePlan:
 
     def guard(self) -> StepGuard:
         """What takes a submitted model out of this race (DNF) rather than ending it: an
-        output that is NaN or inf, or steps over the budget. Bots are not guarded."""
-        from submissions import NonFiniteOutput
+        output that is NaN or inf or of the wrong shape, an onnxruntime error, or steps over
+        the budget. Bots are not guarded."""
+        from submissions import ModelFault
 
         return StepGuard(
-            faults=(NonFiniteOutput,),
+            faults=(ModelFault,),
             budget_ms=self.step_budget_ms,
             window=self.step_window,
             cars=frozenset(c.name for c in self.cars if c.model is not None),

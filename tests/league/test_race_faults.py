@@ -25,6 +25,7 @@ from league.jobs.evaluation import CarPlan, RacePlan, policies
 from league.jobs.scheduler import due_rounds
 from league.jobs.worker import Worker
 from league.models import Entry, Job, Race
+from submissions import validate
 from tests.league.conftest import League, start_league
 from tests.league.helpers import create_event, enter, round_job, upload
 from tests.league.page_text import read_page
@@ -126,6 +127,80 @@ def slow_on_real_frames(doublings: int = 10, passes: int = 100) -> bytes:
     return _archive(nodes, inits)
 
 
+def _gate_scalar(nodes: list, scale: float, name: str) -> str:
+    """Append nodes for ``int64 [round(max(gate0) * scale)]``; return its name."""
+    nodes += [
+        helper.make_node("ReduceMax", ["gate0"], [f"{name}_max"], keepdims=1),
+        helper.make_node("Mul", [f"{name}_max", f"{name}_scale"], [f"{name}_f"]),
+        helper.make_node("Cast", [f"{name}_f"], [name], to=TensorProto.INT64),
+    ]
+    return name
+
+
+def unrunnable_on_real_frames() -> bytes:
+    """Reshapes its logits to ``(-1, 10 + 3 * gate)``: fine on noise; on a real frame ten
+    values a row cannot fill rows of 13, and onnxruntime raises."""
+    nodes, inits = _smooth_gate()
+    extra = _gate_scalar(nodes, 3.0, "extra")
+    nodes += [
+        helper.make_node("Add", [extra, "width"], ["columns"]),
+        helper.make_node("Concat", ["minus_one", "columns"], ["shape"], axis=0),
+        helper.make_node("Reshape", ["logits", "shape"], ["out"]),
+    ]
+    inits += [
+        _t("extra_scale", np.array([3.0], np.float32)),
+        _t("width", np.array([N_ACTIONS], np.int64)),
+        _t("minus_one", np.array([-1], np.int64)),
+    ]
+    return _archive(nodes, inits)
+
+
+def narrow_on_real_frames() -> bytes:
+    """Slices its logits to ``10 - 5 * gate`` columns: ten on noise, five on a real frame."""
+    nodes, inits = _smooth_gate()
+    cut = _gate_scalar(nodes, 5.0, "cut")
+    nodes += [
+        helper.make_node("Sub", ["width", cut], ["end"]),
+        helper.make_node("Slice", ["logits", "s0", "end", "ax1"], ["out"]),
+    ]
+    inits += [
+        _t("cut_scale", np.array([5.0], np.float32)),
+        _t("width", np.array([N_ACTIONS], np.int64)),
+    ]
+    return _archive(nodes, inits)
+
+
+def test_a_model_onnxruntime_cannot_run_or_that_narrows_its_output_is_out() -> None:
+    for hostile in (unrunnable_on_real_frames(), narrow_on_real_frames()):
+        assert validate(hostile).ok  # both pass validation on random frames
+    config = arena.make_config(
+        race_type="head_to_model", sensors=("camera",), num_cars=3, laps=1, time_limit_s=8.0
+    )
+    names = [c.name for c in config.cars]
+    plan = RacePlan(
+        config,
+        (
+            CarPlan(names[0], 1, model=unrunnable_on_real_frames()),
+            CarPlan(names[1], 2, model=narrow_on_real_frames()),
+            CarPlan(names[2], None, bot="pursuit"),
+        ),
+    )
+    result = run_race(plan.config, policies(plan), guard=plan.guard())
+    unrunnable, narrow, bot = (result.car(n) for n in names)
+    assert unrunnable.status == "dnf" and unrunnable.dnf_reason is not None
+    assert unrunnable.dnf_reason.startswith(
+        f"model fault: car {names[0]}: onnxruntime failed at step 1 in a Reshape node:"
+    )
+    assert "cannot be reshaped" in unrunnable.dnf_reason
+    assert "[ONNXRuntimeError]" not in unrunnable.dnf_reason
+    assert "/onnxruntime_src" not in unrunnable.dnf_reason
+    assert (narrow.status, narrow.dnf_reason) == (
+        "dnf",
+        f"model fault: car {names[1]}: the model output shape (1, 5) at step 1, not (1, 10)",
+    )
+    assert bot.dnf_reason is None and bot.distance > 3.0
+
+
 def test_a_car_that_faults_on_real_frames_is_out_and_the_other_races_on() -> None:
     config = arena.make_config(
         race_type="head_to_model", sensors=("camera",), num_cars=3, laps=1, time_limit_s=12.0
@@ -218,7 +293,10 @@ def test_hostile_models_lose_their_races_not_the_rounds_and_are_suspended(
         shown = client.get(f"/api/races/{race_ids[0]}").json()
         page = read_page(client.get(f"/races/{race_ids[0]}").text)
     reasons = shown["summary"]["dnf_reasons"]
-    assert {c["status"] for c in shown["cars"] if c["entry_id"] in (bad, slow)} == {"dnf"}
+    shown_cars = {c["entry_id"]: c for c in shown["cars"]}
+    assert {shown_cars[e]["status"] for e in (bad, slow)} == {"dnf"}
+    assert "NaN or inf" in shown_cars[bad]["dnf_reason"]
+    assert shown_cars[good["entry_id"]]["dnf_reason"] is None
     assert "NaN or inf" in reasons[f"entry{bad}"]
     assert "Out of the race" in page.headings
     assert f"entry{bad} : model fault: car entry{bad}: the model output NaN or inf" in page.text
