@@ -183,7 +183,9 @@ def measure(url: str, args: argparse.Namespace, label: str) -> list[list[str]]:
                 "leaderboard 304": (f"/api/events/{event}/leaderboard", [f"If-None-Match: {etag}"]),
                 "races list": (f"/api/races?event={event}&limit=20", []),
                 "race detail": (f"/api/races/{race}", []),
+                "trace": (f"/api/races/{race}/trace", []),
                 "trace (gzip)": (f"/api/races/{race}/trace", ["Accept-Encoding: gzip"]),
+                "track": ("/api/tracks/slipstream_speedway", []),
             }
             for name, (path, headers) in routes.items():
                 wrk(base + path, 4, 1, wrk_core, headers=headers)  # warm up

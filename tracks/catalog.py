@@ -102,13 +102,18 @@ def _read_version(path: Path, inode: int, mtime_ns: int, size: int) -> Track | T
         return TrackFileError(exc.path, exc.problem)  # without the traceback's frames
 
 
-def _read_user_track(path: Path) -> Track:
-    """The user track in ``path``, from the cache while the file is unchanged."""
+def _file_version(path: Path) -> tuple[int, int, int]:
+    """What changes when a user track file is replaced or written: inode, mtime, size."""
     try:
         stat = path.stat()
     except OSError:
         raise TrackFileError(path, "no such file") from None
-    result = _read_version(path, stat.st_ino, stat.st_mtime_ns, stat.st_size)
+    return stat.st_ino, stat.st_mtime_ns, stat.st_size
+
+
+def _read_user_track(path: Path) -> Track:
+    """The user track in ``path``, from the cache while the file is unchanged."""
+    result = _read_version(path, *_file_version(path))
     if isinstance(result, TrackFileError):
         raise result
     return result
@@ -139,6 +144,21 @@ def get_track(name: str, direction: Direction | None = None) -> Track:
             problem = exc.problem.replace(str(path.parent), "").replace(path.name, name)
             raise TrackError(f"the user track {name!r} cannot be used: {problem}") from None
     return track if direction is None else track.with_direction(direction)
+
+
+def track_version(name: str) -> tuple[str | int, ...]:
+    """A value that changes whenever :func:`get_track` would return another track for
+    ``name``: one ``stat`` of a user track's file, without reading it. Raises
+    :class:`TrackNotFoundError` as :func:`get_track` does."""
+    if name in BUILTIN_DESIGNS:
+        return ("builtin",)
+    path = user_track_dir() / f"{name}.json"
+    if not NAME_PATTERN.match(name):
+        raise _unknown(name)
+    try:
+        return _file_version(path)
+    except TrackFileError:
+        raise _unknown(name) from None
 
 
 def list_tracks() -> list[TrackInfo]:

@@ -18,9 +18,10 @@ import time
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
+from typing import Any
 
 from fastapi.concurrency import run_in_threadpool
-from sqlalchemy import Engine, func, select
+from sqlalchemy import Dialect, Engine, Select, bindparam, func, select
 from starlette.requests import Request
 from starlette.responses import Response
 
@@ -182,37 +183,85 @@ async def answer_gzipped(
     return Response(plain.body, media_type=plain.media_type, headers=headers)
 
 
+class DriverQuery:
+    """A fixed ``SELECT`` compiled once per dialect and run on the driver's own cursor.
+
+    The version reads run before every public read, so they skip what SQLAlchemy does per
+    execution (building the statement, its cache key, the result object): a plain cursor
+    from the engine's pool, the compiled SQL and its parameters, one row back.
+    """
+
+    def __init__(self, statement: Select) -> None:
+        self.statement = statement
+        self._compiled: dict[str, tuple[str, dict[str, Any], tuple[str, ...] | None]] = {}
+
+    def _for(self, dialect: Dialect) -> tuple[str, dict[str, Any], tuple[str, ...] | None]:
+        found = self._compiled.get(dialect.name)
+        if found is None:
+            compiled = self.statement.compile(dialect=dialect)
+            order = tuple(compiled.positiontup) if compiled.positional else None
+            found = self._compiled[dialect.name] = (compiled.string, compiled.params, order)
+        return found
+
+    def first(self, engine: Engine, **params: Any) -> tuple[Any, ...] | None:
+        """The first row for ``params`` (the statement's bind parameters by name), or None."""
+        sql, defaults, order = self._for(engine.dialect)
+        values = {**defaults, **params}
+        args = tuple(values[name] for name in order) if order is not None else values
+        connection = engine.raw_connection()
+        driver = connection.driver_connection
+        autocommit = engine.dialect.name == "postgresql"  # no BEGIN and ROLLBACK round trips
+        try:
+            if autocommit:
+                driver.autocommit = True  # type: ignore[union-attr]
+            cursor = connection.cursor()
+            try:
+                cursor.execute(sql, args)
+                return cursor.fetchone()
+            finally:
+                cursor.close()
+        finally:
+            if autocommit:
+                driver.autocommit = False  # type: ignore[union-attr]
+            connection.close()  # back to the pool
+
+
 def _engine(request: Request) -> Engine:
     return request.app.state.engine
 
 
+EVENT_VERSION = DriverQuery(select(Event.results_version).where(Event.id == bindparam("event_id")))
+LEAGUE_VERSION = DriverQuery(
+    select(
+        func.count(Event.id),
+        func.coalesce(func.max(Event.id), 0),
+        func.coalesce(func.sum(Event.results_version), 0),
+    )
+)
+RACE_VERSION = DriverQuery(
+    select(Race.event_id, Event.results_version, Race.trace_sha256)
+    .join(Event, Race.event_id == Event.id)
+    .where(Race.id == bindparam("race_id"))
+)
+
+
 def event_version(request: Request, event_id: int) -> int | None:
     """The event's ``results_version`` (None: no such event); one primary-key read."""
-    with _engine(request).connect() as connection:
-        query = select(Event.results_version).where(Event.id == event_id)
-        return connection.execute(query).scalar()
+    row = EVENT_VERSION.first(_engine(request), event_id=event_id)
+    return None if row is None else row[0]
 
 
 def league_version(request: Request) -> tuple[int, int, int]:
     """What changes whenever any event is added or any event's results change: the count
     and highest id of events and the sum of their ``results_version``."""
-    query = select(
-        func.count(Event.id), func.coalesce(func.max(Event.id), 0),
-        func.coalesce(func.sum(Event.results_version), 0),
-    )  # fmt: skip
-    with _engine(request).connect() as connection:
-        count, top, total = connection.execute(query).one()
-        return int(count), int(top), int(total)
+    row = LEAGUE_VERSION.first(_engine(request))
+    assert row is not None
+    count, top, total = row
+    return int(count), int(top), int(total)
 
 
 def race_version(request: Request, race_id: int) -> tuple[int, int, str | None] | None:
     """The race's event id, that event's ``results_version`` and the race's trace digest
     (None: no such race); one indexed join."""
-    query = (
-        select(Race.event_id, Event.results_version, Race.trace_sha256)
-        .join(Event, Race.event_id == Event.id)
-        .where(Race.id == race_id)
-    )
-    with _engine(request).connect() as connection:
-        row = connection.execute(query).first()
-        return None if row is None else (row[0], row[1], row[2])
+    row = RACE_VERSION.first(_engine(request), race_id=race_id)
+    return None if row is None else (row[0], row[1], row[2])

@@ -129,6 +129,28 @@ def test_a_user_track_is_checked_once_not_on_every_request(
     assert len(checks) == 1
 
 
+def test_a_track_read_is_revalidated_and_follows_its_file(league: League, home: Path) -> None:
+    path = _user_track(home, "their_loop")
+    with league.client() as anonymous:
+        first = anonymous.get("/api/tracks/their_loop")
+        again = anonymous.get(
+            "/api/tracks/their_loop", headers={"If-None-Match": first.headers["etag"]}
+        )
+        doc = json.loads(path.read_text())
+        doc["display_name"] = "Their Loop, resurfaced"
+        path.write_text(json.dumps(doc))
+        changed = anonymous.get(
+            "/api/tracks/their_loop", headers={"If-None-Match": first.headers["etag"]}
+        )
+        path.unlink()
+        gone = anonymous.get("/api/tracks/their_loop")
+    assert first.status_code == 200 and again.status_code == 304
+    assert changed.status_code == 200
+    assert changed.json()["display_name"] == "Their Loop, resurfaced"
+    assert changed.headers["etag"] != first.headers["etag"]
+    assert gone.status_code == 404
+
+
 def test_event_errors_show_no_server_path_and_no_other_users_tracks(
     league: League, home: Path
 ) -> None:

@@ -5,11 +5,12 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from fastapi import APIRouter, HTTPException, Path, Query
+from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
 from pydantic import BaseModel
 
+from league.http.read_cache import Prepared, answer, prepared
 from league.schemas import ErrorOut
-from tracks.catalog import NAME_PATTERN, get_track
+from tracks.catalog import NAME_PATTERN, get_track, track_version
 from tracks.track import TrackError
 
 router = APIRouter(prefix="/api/tracks", tags=["tracks"])
@@ -34,27 +35,17 @@ def _points(array: np.ndarray) -> list[Point]:
     return [(round(float(x), 3), round(float(y), 3)) for x, y in array]
 
 
-@router.get(
-    "/{name}",
-    response_model=TrackGeometry,
-    responses={404: {"model": ErrorOut, "description": "No such track"}},
-)
-def read_track(
-    name: Annotated[str, Path(pattern=NAME_PATTERN.pattern)],
-    direction: Annotated[
-        Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
-    ] = None,
-) -> TrackGeometry:
-    """The centre line (waypoints) and left / right borders of a built-in or imported track.
+def _not_found(name: str, error: TrackError) -> HTTPException:
+    return HTTPException(404, f"Track {name!r} not found: {error}.")
 
-    An imported track is checked once per version of its file (``tracks.catalog``); the
-    404's text names no server path and lists the built-in tracks only.
-    """
+
+def _geometry(name: str, direction: Literal["ccw", "cw"] | None) -> Prepared:
+    """The track's geometry as JSON, built once per version of the track."""
     try:
         track = get_track(name, direction)
     except TrackError as exc:
-        raise HTTPException(404, f"Track {name!r} not found: {exc}.") from None
-    return TrackGeometry(
+        raise _not_found(name, exc) from None
+    geometry = TrackGeometry(
         name=track.name,
         display_name=track.display_name,
         direction=track.direction,
@@ -65,3 +56,33 @@ def read_track(
         left=_points(track.left),
         right=_points(track.right),
     )
+    return Prepared.of(geometry.model_dump_json().encode(), "application/json")
+
+
+@router.get(
+    "/{name}",
+    response_model=TrackGeometry,
+    responses={404: {"model": ErrorOut, "description": "No such track"}},
+)
+async def read_track(
+    name: Annotated[str, Path(pattern=NAME_PATTERN.pattern)],
+    request: Request,
+    direction: Annotated[
+        Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
+    ] = None,
+) -> Response:
+    """The centre line (waypoints) and left / right borders of a built-in or imported track
+    (ETag).
+
+    Built once per version of the track's file (one ``stat`` a request; an imported track
+    is read and checked in a worker thread, never on the event loop); the 404's text names
+    no server path and lists the built-in tracks only.
+    """
+    try:
+        version = track_version(name)
+    except TrackError as exc:
+        raise _not_found(name, exc) from None
+    key = ("track", name, direction, version)
+    item = await prepared(request, key, lambda: _geometry(name, direction))
+    assert item is not None
+    return answer(request, item)
