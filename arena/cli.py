@@ -1,14 +1,15 @@
-"""``slipstream race``: run a race with built-in drivers, print results, write a replay."""
+"""The arena's pieces of ``slipstream race`` (:mod:`slipstream.race`): the built-in drivers
+and the results tables."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-from typing import Annotated
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-import typer
+if TYPE_CHECKING:
+    from rich.table import Table
 
-from arena.config import ConfigError, resolve_track
+    from arena.race import RaceResult
 
 DRIVERS = ("bot", "random")
 
@@ -29,102 +30,7 @@ class RandomPolicy:
         return self.space.sample()
 
 
-def race_command(
-    track: Annotated[
-        str, typer.Option(help="Track name (see `slipstream tracks list`).")
-    ] = "beginner_loop",
-    race_type: Annotated[
-        str, typer.Option(help="time_trial | object_avoidance | head_to_bot | head_to_model")
-    ] = "time_trial",
-    direction: Annotated[
-        str | None, typer.Option(help="ccw or cw (default: the way the track's file runs).")
-    ] = None,
-    cars: Annotated[
-        int | None, typer.Option(help="Controlled cars (default 1; 2 for head_to_model).")
-    ] = None,
-    driver: Annotated[
-        str, typer.Option(help="Built-in driver for every car: bot | random.")
-    ] = "bot",
-    speed: Annotated[float, typer.Option(help="Target speed of the bot driver, m/s.")] = 1.5,
-    laps: Annotated[int, typer.Option(help="Laps to race.")] = 3,
-    sensors: Annotated[str, typer.Option(help="Comma-separated sensors.")] = "lidar",
-    time_limit: Annotated[float, typer.Option(help="Race time limit, simulated seconds.")] = 180.0,
-    seed: Annotated[int, typer.Option(help="Race seed.")] = 0,
-    out: Annotated[Path | None, typer.Option(help="Folder for result.json and replay.gif.")] = None,
-    gif: Annotated[bool, typer.Option(help="Write a GIF replay into --out.")] = True,
-    as_json: Annotated[bool, typer.Option("--json", help="Print the result as JSON.")] = False,
-) -> None:
-    """Race built-in drivers on a track and print the results table."""
-    from rich.console import Console
-    from rich.markup import escape
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from arena import make_config
-    from arena.drivers import LaneFollowerPolicy
-    from arena.race import run_race
-    from arena.replay import ReplayWriter
-
-    err = Console(stderr=True)
-    if driver not in DRIVERS:
-        choices = ", ".join(DRIVERS)
-        err.print(f"[red]error:[/] unknown driver {escape(repr(driver))}; choose from {choices}")
-        raise typer.Exit(1)
-    try:
-        config = make_config(
-            track=track,
-            race_type=race_type,
-            num_cars=cars,
-            sensors=tuple(s.strip() for s in sensors.split(",") if s.strip()),
-            seed=seed,
-            direction=direction,
-            laps=laps,
-            time_limit_s=time_limit,
-        )
-        race_track, _ = resolve_track(config)
-    except (ConfigError, ValueError, KeyError) as exc:
-        err.print(f"[red]error:[/] {escape(str(exc))}")
-        raise typer.Exit(1) from None
-    policies = {}
-    for i, car in enumerate(config.cars):
-        if driver == "bot":
-            policies[car.name] = LaneFollowerPolicy(race_track, car.action_space, speed)
-        else:
-            policies[car.name] = RandomPolicy(car.action_space.gym_space(), seed + i)
-    writer = ReplayWriter(race_track) if (out is not None and gif) else None
-    with Progress(
-        TextColumn("racing"),
-        BarColumn(),
-        TextColumn("{task.completed:.0f}/{task.total:.0f} s"),
-        TimeElapsedColumn(),
-        console=err,
-        disable=as_json,
-    ) as progress:
-        task = progress.add_task("race", total=config.time_limit_s)
-
-        def on_step(env) -> None:
-            progress.update(task, completed=env.time)
-            if writer is not None:
-                writer.add(env)
-
-        try:
-            result = run_race(config, policies, on_step=on_step)
-        except (ConfigError, ValueError) as exc:
-            err.print(f"[red]error:[/] {escape(str(exc))}")
-            raise typer.Exit(1) from None
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "result.json").write_text(result.to_json())
-        if writer is not None:
-            writer.save(out / "replay.gif")
-    if as_json:
-        typer.echo(json.dumps({k: v for k, v in result.to_dict().items() if k != "trace"}))
-        return
-    print_results(result)
-    if out is not None:
-        err.print(f"wrote {out / 'result.json'}" + (f" and {out / 'replay.gif'}" if writer else ""))
-
-
-def print_results(result) -> None:
+def print_results(result: RaceResult) -> None:
     """A Rich table of a race result, in finishing order: times, the gap to the winner,
     incidents and racing metrics (overtakes made and suffered, at-fault collisions, laps
     led)."""
@@ -175,3 +81,41 @@ def print_results(result) -> None:
             str(c.laps_led),
         )
     Console().print(table)
+
+
+def win_rates_table(results: Sequence[RaceResult]) -> Table:
+    """Per car over several races of the same cars: wins (and wins from a slot behind the
+    front of the grid), mean finishing position, and overtakes, overtaken, at-fault
+    collisions, off-tracks and DNFs per race."""
+    from rich.table import Table
+
+    races = len(results)
+    first = results[0].config
+    table = Table(title=f"{races} races, {first.race_type} on {first.track}")
+    columns = ("car", "wins", "win %", "wins from behind", "mean pos", "overtakes/race",
+               "overtaken/race", "at-fault/race", "off-track/race", "DNF")  # fmt: skip
+    for column in columns:
+        table.add_column(column, justify="left" if column == "car" else "right")
+    names = [c.name for c in first.cars]
+    for name in sorted(names):
+        cars = [r.car(name) for r in results]
+        wins = [c for c in cars if c.finish_position == 1 and c.status == "finished"]
+        behind = [c for c in wins if c.grid_offset is not None and c.grid_offset < 0]
+        started_behind = sum(1 for c in cars if c.grid_offset is not None and c.grid_offset < 0)
+
+        def per_race(field: str, cars: list = cars) -> str:
+            return f"{sum(getattr(c, field) for c in cars) / races:.2f}"
+
+        table.add_row(
+            name,
+            str(len(wins)),
+            f"{100 * len(wins) / races:.0f}",
+            f"{len(behind)}/{started_behind}",
+            f"{sum(c.finish_position for c in cars) / races:.2f}",
+            per_race("overtakes"),
+            per_race("times_overtaken"),
+            per_race("at_fault_collisions"),
+            per_race("off_track_count"),
+            str(sum(1 for c in cars if c.status == "dnf")),
+        )
+    return table

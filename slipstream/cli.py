@@ -11,8 +11,8 @@ import typer
 
 from agents.cli import evaluate_command, train
 from agents.pack_command import pack_command
-from arena.cli import race_command
 from league.cli import app as league_app
+from slipstream.race import race_command
 from submissions.cli import app as model_app
 from tracks.cli import app as tracks_app
 
@@ -26,7 +26,7 @@ app.add_typer(tracks_app, name="tracks", help="Tracks: list, show, import, racin
 model_app.command("pack")(pack_command)  # agents' command: it reads runs and DeepRacer files
 app.add_typer(model_app, name="model", help="Model files: pack, validate, inspect, pre-flight.")
 app.add_typer(league_app, name="league", help="The league: server, racers, events, standings.")
-app.command("race", help="Race built-in drivers on a track.")(race_command)
+app.command("race", help="Race built-in drivers, or model files head to head.")(race_command)
 app.command("train", help="Train a policy with PPO (rsl-rl), DeepRacer-style.")(train)
 app.command("evaluate", help="Race a training run's policy and print its results.")(
     evaluate_command

@@ -71,3 +71,60 @@ def test_user_text_in_errors_is_printed_literally_not_as_markup(args: list[str])
     result = runner.invoke(app, args)
     assert result.exit_code == 1 and isinstance(result.exception, SystemExit), result.exception
     assert args[-1] in result.output
+
+
+SAMPLES = Path(__file__).resolve().parents[1] / "league" / "demo_models"
+
+
+@pytest.mark.slow
+def test_race_model_files_head_to_head_with_a_bot_over_rotating_grids(tmp_path: Path) -> None:
+    models = [SAMPLES / "sample-time-trial.zip", SAMPLES / "sample-self-play.zip"]
+    args = ["race", "--model", str(models[0]), "--model", str(models[1]), "--bots", "1"]
+    args += ["--laps", "1", "--time-limit", "15", "--seeds", "3", "--seed", "5"]
+    result = runner.invoke(app, [*args, "--json", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    races = json.loads(result.output)
+    assert [r["config"]["seed"] for r in races] == [5, 6, 7]
+    names = {"sample-time-trial", "sample-self-play", "bot0"}
+    assert all({c["name"] for c in r["cars"]} == names for r in races)
+    assert all(r["config"]["race_type"] == "head_to_model" for r in races)
+    assert races[0]["config"]["track"] == "slipstream_speedway"  # a real-width default
+    fronts = [next(c["name"] for c in r["cars"] if c["grid_offset"] == 0.0) for r in races]
+    assert sorted(fronts) == sorted(names)  # the grid rotates: each car starts in front once
+    assert all(max(c["distance"] for c in r["cars"]) > 5.0 for r in races)  # they raced
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seed-5", "seed-6", "seed-7"]
+    assert (tmp_path / "seed-6" / "replay.gif").is_file()
+
+    wide = {"COLUMNS": "200"}
+    table = runner.invoke(app, [*args[:-6], "--time-limit", "5", "--seeds", "2"], env=wide)
+    assert table.exit_code == 0, table.output
+    assert "2 races, head_to_model on slipstream_speedway" in table.output
+    assert "wins from behind" in table.output
+    rows = [line for line in table.output.splitlines() if "sample-" in line or "bot0" in line]
+    assert len(rows) == 3
+
+
+def test_a_model_that_faults_in_the_race_is_out_of_it_not_the_command(tmp_path: Path) -> None:
+    from tests.league.test_race_faults import inf_on_real_frames
+
+    hostile = tmp_path / "cliff.zip"
+    hostile.write_bytes(inf_on_real_frames())
+    args = ["race", "--model", str(hostile), "--bots", "1", "--laps", "1", "--time-limit", "6"]
+    result = runner.invoke(app, [*args, "--json"])
+    assert result.exit_code == 0, result.output
+    cars = {c["name"]: c for c in json.loads(result.output)["cars"]}
+    assert cars["cliff"]["status"] == "dnf"
+    assert "the model output NaN or inf" in cars["cliff"]["dnf_reason"]
+    assert cars["bot0"]["dnf_reason"] is None and cars["bot0"]["distance"] > 2.0
+
+
+def test_race_refuses_bad_model_files_and_bots_without_models(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.zip"
+    broken.write_bytes(b"PK\x03\x04 not really a zip")
+    bad = runner.invoke(app, ["race", "--model", str(broken)])
+    assert bad.exit_code == 1
+    assert "broken.zip is not a valid model file" in " ".join(bad.output.split())
+    missing = runner.invoke(app, ["race", "--model", str(tmp_path / "nowhere.zip")])
+    assert missing.exit_code == 1 and "nowhere.zip" in missing.output
+    lonely = runner.invoke(app, ["race", "--bots", "2"])
+    assert lonely.exit_code == 1 and "--model" in lonely.output
