@@ -166,7 +166,7 @@ def race_command(
     except (ConfigError, ValueError, KeyError) as exc:
         raise _fail(err, str(exc)) from None
     results = [
-        _race_once(_rotated(config, seed + k, k), race, _folder(out, seeds, seed + k), gif, err,
+        _race_once(rotated(config, seed + k, k), race, _folder(out, seeds, seed + k), gif, err,
                    quiet=as_json, label=f"race {k + 1}/{seeds}")
         for k in range(seeds)
     ]  # fmt: skip
@@ -199,7 +199,7 @@ def _builtin_race(config: RaceConfig, driver: str, speed: float, seed: int) -> R
     return race
 
 
-def _rotated(config: RaceConfig, seed: int, turn: int) -> RaceConfig:
+def rotated(config: RaceConfig, seed: int, turn: int) -> RaceConfig:
     """``config`` with ``seed`` and its cars rotated ``turn`` slots along the grid."""
     shift = turn % len(config.cars)
     cars = (*config.cars[shift:], *config.cars[:shift])

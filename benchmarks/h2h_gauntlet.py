@@ -1,0 +1,179 @@
+"""Head-to-head gauntlet: one model file against a fixed field on real-width tracks.
+
+For each track (default: the built-in tracks as wide as DeepRacer's, 1.07 m) the model
+first laps alone (its solo lap: the mean over five time trials, penalties included), then
+races two-car heats, ``--races`` seeded races per rival with the grid alternating (seeds
+0, 1, ...; on odd seeds the model starts in front):
+
+- a centre-line follower held to 60, 80, 90 and 100% of the model's solo pace (its mean
+  speed over the solo laps);
+- each other model file of ``--field`` (default: the other sample models);
+- the scripted teacher (the passing pursuit driver, the league's bot).
+
+One table, a row per (track, rival): the model's wins from behind and from ahead,
+overtakes and at-fault collisions per race (the model's, ``arena.racing_metrics``), and
+the seconds a lap it lost in the races it started behind, against its solo laps (total
+time per lap minus the solo lap time; races it did not finish are left out and counted).
+
+    .venv/bin/python benchmarks/h2h_gauntlet.py --model league/demo_models/sample-self-play.zip
+    .venv/bin/python benchmarks/h2h_gauntlet.py --model M.zip --races 4 --laps 1  # quick
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from statistics import mean
+from typing import Any
+
+from harness import ROOT, ResultTable, add_record_option, write
+from rich.progress import Progress
+
+from arena.actions import ContinuousActionSpace
+from arena.config import CarConfig, RaceConfig, SeedVariation, resolve_track
+from arena.drivers import LaneFollowerPolicy
+from arena.pursuit import PassingPursuitPolicy
+from arena.race import RaceResult, StepGuard, run_race
+from league.jobs.evaluation import model_car
+from slipstream.race import rotated
+from submissions import ModelFault, load_policy
+from tracks.catalog import builtin_names, get_track
+
+SAMPLES = ROOT / "league" / "demo_models"
+PACES = (0.6, 0.8, 0.9, 1.0)
+DEEPRACER_WIDTH_M = 1.067
+ME, RIVAL = "model", "rival"
+
+
+@dataclass
+class Heat:
+    """One rival: a name for the table and how to build its driver on a track."""
+
+    name: str
+    car: CarConfig
+    driver: Any
+
+
+def _rules(track: str, laps: int, seed: int, race_type: str) -> dict[str, Any]:
+    return {
+        "track": track,
+        "race_type": race_type,
+        "laps": laps,
+        "seed": seed,
+        "time_limit_s": 60.0 * laps,
+        "variation": SeedVariation(shuffle_grid=False),
+    }
+
+
+SOLO_RACES = 5
+
+
+def solo_lap(model: Any, car: CarConfig, track: str, laps: int) -> float | None:
+    """The model's mean lap time racing alone, penalties included, over the time trials of
+    seeds 0-4 it finished (None: it finished none)."""
+    totals = []
+    for seed in range(SOLO_RACES):
+        config = RaceConfig.build(cars=[car], **_rules(track, laps, seed, "time_trial"))
+        result = run_race(config, {ME: model}, guard=StepGuard(faults=(ModelFault,)))
+        totals += [] if result.car(ME).total_time is None else [result.car(ME).total_time]
+    return mean(totals) / laps if totals else None
+
+
+def rivals(track_name: str, car: CarConfig, pace: float, field: list[Path]) -> list[Heat]:
+    """The field on one track: paced followers, the other models, the teacher."""
+    track = get_track(track_name)
+    scripted = CarConfig(name=RIVAL, action_space=ContinuousActionSpace())  # 0.5-4 m/s
+    space = scripted.action_space
+    heats = [
+        Heat(f"follower {p:.0%}", scripted, LaneFollowerPolicy(track, space, p * pace))
+        for p in PACES
+    ]
+    for path in field:
+        other = load_policy(path, non_finite="raise", name=f"car {RIVAL}")
+        heats.append(Heat(path.stem, model_car(RIVAL, other.info.model_dump(mode="json")), other))
+    heats.append(Heat("teacher", scripted, PassingPursuitPolicy(track, space)))
+    return heats
+
+
+def race_heat(model: Any, car: CarConfig, heat: Heat, track: str, laps: int, k: int) -> RaceResult:
+    """Race ``k`` of a heat: seed ``k``, the model behind on even ``k``."""
+    config = RaceConfig.build(cars=[heat.car, car], **_rules(track, laps, k, "head_to_model"))
+    config = rotated(config, k, k)
+    guard = StepGuard(faults=(ModelFault,))  # a rival model's faults retire it too
+    return run_race(config, {ME: model, RIVAL: heat.driver}, guard=guard)
+
+
+def row(results: list[RaceResult], solo: float | None, laps: int) -> list[str]:
+    """The table cells of one heat, from the model's side."""
+    mine = [r.car(ME) for r in results]
+    behind = [c for c in mine if (c.grid_offset or 0.0) < 0]
+    ahead = [c for c in mine if (c.grid_offset or 0.0) == 0]
+
+    def wins(cars: list) -> str:
+        won = sum(1 for c in cars if c.finish_position == 1 and c.status == "finished")
+        return f"{won}/{len(cars)}"
+
+    lost = [c.total_time / laps - solo for c in behind if c.total_time is not None and solo]
+    unfinished = len(behind) - len(lost)
+    lost_cell = "-" if not lost else f"{mean(lost):+.2f}"
+    if unfinished:
+        lost_cell += f" ({unfinished} DNF)"
+    return [
+        wins(behind),
+        wins(ahead),
+        f"{mean(c.overtakes for c in mine):.2f}",
+        f"{mean(c.at_fault_collisions for c in mine):.2f}",
+        lost_cell,
+    ]
+
+
+def main() -> None:
+    """Parse options, race the gauntlet, write the table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--model", type=Path, default=SAMPLES / "sample-self-play.zip")
+    parser.add_argument(
+        "--field", type=Path, nargs="*", help="other model files (default: the other samples)"
+    )
+    real_width = [n for n in builtin_names() if get_track(n).width >= DEEPRACER_WIDTH_M - 0.01]
+    parser.add_argument("--tracks", default=",".join(real_width))
+    parser.add_argument("--races", type=int, default=20, help="seeded races per rival")
+    parser.add_argument("--laps", type=int, default=3)
+    add_record_option(parser)
+    args = parser.parse_args()
+    field = args.field
+    if field is None:
+        field = [p for p in sorted(SAMPLES.glob("*.zip")) if p.resolve() != args.model.resolve()]
+    model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
+    car = model_car(ME, model.info.model_dump(mode="json"))
+    columns = ["track", "rival", "wins from behind", "wins from ahead", "overtakes/race",
+               "at-fault/race", "s/lap lost behind"]  # fmt: skip
+    table = ResultTable(
+        f"Gauntlet of {args.model.name}: {args.races} races per rival, {args.laps} laps",
+        columns,
+        "ll" + "r" * 5,
+    )
+    with Progress() as progress:
+        for track in args.tracks.split(","):
+            resolve_track(RaceConfig.build(track=track, cars=[car]))  # unknown names fail here
+            solo = solo_lap(model, car, track, args.laps)
+            length = get_track(track).length
+            pace = length / solo if solo else 1.0
+            table.notes.append(
+                f"{track}: solo lap {solo:.2f} s ({pace:.2f} m/s)"
+                if solo
+                else f"{track}: the model did not finish alone; followers paced at 1 m/s"
+            )
+            heats = rivals(track, car, pace, field)
+            task = progress.add_task(track, total=len(heats) * args.races)
+            for heat in heats:
+                results = []
+                for k in range(args.races):
+                    results.append(race_heat(model, car, heat, track, args.laps, k))
+                    progress.advance(task)
+                table.add_row(track, heat.name, *row(results, solo, args.laps))
+    write(table, args.record)
+
+
+if __name__ == "__main__":
+    main()
