@@ -17,6 +17,7 @@ time per lap minus the solo lap time; races it did not finish are left out and c
 
     .venv/bin/python benchmarks/h2h_gauntlet.py --model league/demo_models/sample-self-play.zip
     .venv/bin/python benchmarks/h2h_gauntlet.py --model M.zip --races 4 --laps 1  # quick
+    .venv/bin/python benchmarks/h2h_gauntlet.py --teacher --field  # the teacher, no models
 """
 
 from __future__ import annotations
@@ -130,8 +131,12 @@ def row(results: list[RaceResult], solo: float | None, laps: int) -> list[str]:
 
 def main() -> None:
     """Parse options, race the gauntlet, write the table."""
+    model: Any
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--model", type=Path, default=SAMPLES / "sample-self-play.zip")
+    parser.add_argument(
+        "--teacher", action="store_true", help="run the scripted teacher through it, not --model"
+    )
     parser.add_argument(
         "--field", type=Path, nargs="*", help="other model files (default: the other samples)"
     )
@@ -144,18 +149,24 @@ def main() -> None:
     field = args.field
     if field is None:
         field = [p for p in sorted(SAMPLES.glob("*.zip")) if p.resolve() != args.model.resolve()]
-    model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
-    car = model_car(ME, model.info.model_dump(mode="json"))
+    if args.teacher:
+        car = CarConfig(name=ME, action_space=ContinuousActionSpace())
+    else:
+        model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
+        car = model_car(ME, model.info.model_dump(mode="json"))
+    subject = "the teacher" if args.teacher else args.model.name
     columns = ["track", "rival", "wins from behind", "wins from ahead", "overtakes/race",
                "at-fault/race", "s/lap lost behind"]  # fmt: skip
     table = ResultTable(
-        f"Gauntlet of {args.model.name}: {args.races} races per rival, {args.laps} laps",
+        f"Gauntlet of {subject}: {args.races} races per rival, {args.laps} laps",
         columns,
         "ll" + "r" * 5,
     )
     with Progress() as progress:
         for track in args.tracks.split(","):
             resolve_track(RaceConfig.build(track=track, cars=[car]))  # unknown names fail here
+            if args.teacher:
+                model = PassingPursuitPolicy(get_track(track), car.action_space)
             solo = solo_lap(model, car, track, args.laps)
             length = get_track(track).length
             pace = length / solo if solo else 1.0
