@@ -185,9 +185,11 @@ PASS_BESIDE_M = 0.45
 # car 0.1 m; the params do not say which, so an object moving faster than MOVING_MPS is
 # taken for a car), half the car's (0.1 m) and a margin; and the margin kept from the
 # track's edge. (0.6 m from a box: the lagging steering swings wider than it aims;
-# benchmarks/RESULTS.md, "The car beside DeepRacer's".)
+# benchmarks/RESULTS.md, "The car beside DeepRacer's". 0.32 m from a car: on a 1.067 m
+# track the room beside a car on the centre line is 0.375 m, so 0.4 m left none;
+# "The gauntlet on real-width tracks".)
 BOX_CLEARANCE_M = 0.6
-CAR_CLEARANCE_M = 0.4
+CAR_CLEARANCE_M = 0.32
 MOVING_MPS = 0.1
 PASS_EDGE_MARGIN_M = 0.06
 # The highest speed asked for while steering around an object (a tighter, steadier line).
@@ -199,10 +201,14 @@ REJOIN_M = 0.25
 # pass would cut across its nose): closer, the car follows it on its own side.
 CROSS_GAP_M = 1.5
 FOLLOW_MIN_SPEED = 0.5  # DeepRacer's lowest speed
-# A car ahead faster than FOLLOW_ABOVE_MPS (DeepRacer's bots drive at 0.5-1.0 m/s; a
-# racing car is slower only just after its start or a respawn) is as fast as this one: a
-# pass at PASS_SPEED would lose more than it could gain, so the car follows it on the
-# racing line instead, closing to FOLLOW_GAP_M (centre to centre along the track) at
+# A moving car ahead is passed, at the speed profile's speed, when it drives slower than
+# PASS_PACE of the pace its place on the line allows (the profile's lowest speed over the
+# PACE_WINDOW_M of line up to it: leaving a corner, a car at full pace is still
+# accelerating), so that the pass gains time; one at that pace or faster, and any car in
+# the first START_FOLLOW_STEPS control steps (2 s: from a standing start both cars
+# accelerate alike, and a pass crosses the leader's nose), is as fast as this one: the car
+# follows it on the racing line instead, closing to FOLLOW_GAP_M (centre to centre along
+# the track) at
 # FOLLOW_GAIN m/s per metre of gap error, and never faster than lets it brake at the car's
 # braking limit, after FOLLOW_REACTION_S (three control steps: with one, the follower
 # ran into the leader once a race on the lagging car), to the leader's speed before the
@@ -211,7 +217,9 @@ FOLLOW_MIN_SPEED = 0.5  # DeepRacer's lowest speed
 # closer behind than it started wins: following a racing car wins more races than passing
 # it, and the braking cap keeps the follower off a leader that brakes hard
 # (benchmarks/RESULTS.md, "Following instead of passing").
-FOLLOW_ABOVE_MPS = 1.2
+PASS_PACE = 0.9
+PACE_WINDOW_M = 1.0
+START_FOLLOW_STEPS = 30
 FOLLOW_GAP_M = 0.55
 FOLLOW_GAIN = 3.0
 FOLLOW_MIN_GAP_M = 0.35
@@ -224,9 +232,11 @@ class PassingPursuitPolicy(PurePursuitPolicy):
     Boxes, bots and other cars come from the params (``objects_*``). When one lies within
     :data:`PASS_HORIZON_S` seconds (at least :data:`PASS_HORIZON_M` metres) ahead, or
     still beside the car, and the car's way from where it is to the racing line would pass
-    it closer than the clearance, the car aims beside it instead, at most at
-    :data:`PASS_SPEED`: on the side it is already on when the track has room there, else
-    on the far side. A car too close ahead to cross in front of (:data:`CROSS_GAP_M`) is
+    it closer than the clearance, the car aims beside it instead (past a box at most at
+    :data:`PASS_SPEED`, past a car at the profile's speed): on the side it is already on
+    when the track has room there, else on the far side. A car ahead that drives at
+    :data:`PASS_PACE` of its line's pace or faster is followed on the racing line instead
+    (:meth:`_follow_speed`). A car too close ahead to cross in front of (:data:`CROSS_GAP_M`) is
     followed on this side at its speed until there is room. Off the line by more than
     :data:`REJOIN_M`, it rejoins the line at most at :data:`PASS_SPEED`. On the line with
     no object near it drives as :class:`PurePursuitPolicy`. It is the teacher that
@@ -241,11 +251,18 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         self._line_arc = where.arc_length[order]
         self._line_offset = where.offset[order]
         self._room = 0.5 * track.width - 0.5 * DEFAULT_CAR.width - PASS_EDGE_MARGIN_M
+        self._steps = 0
+
+    def reset(self) -> None:
+        """Start of a race: also restart the count of steps since the start."""
+        super().reset()
+        self._steps = 0
 
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
         """The racing-line command, or one aimed beside an object in the way."""
         steer, speed = super().command_for(params)
-        way = self._way_past(params)
+        self._steps += 1
+        way = self._way_past(params, speed)
         if way is None:
             off_line = abs(_offset(params) - self._line_offset_at(params["projection_distance"]))
             return steer, min(speed, PASS_SPEED) if off_line > REJOIN_M else speed
@@ -261,7 +278,9 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
         return steer, min(speed, most, self.arc_speed(steer, params["speed"]))
 
-    def _way_past(self, params: dict[str, Any]) -> tuple[float | None, float] | None:
+    def _way_past(
+        self, params: dict[str, Any], line_speed: float
+    ) -> tuple[float | None, float] | None:
         """``(lateral offset to aim at, m left positive; speed cap)`` past the nearest
         object in the way, ``(None, speed cap)`` to follow a racing car on the racing
         line, or None to drive the racing line."""
@@ -284,15 +303,17 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             low, high = sorted((here, self._line_offset_at(arc + gaps[i])))
             if max(low - obstacle, obstacle - high) >= clearance:
                 continue
-            if gaps[i] > 0.0 and object_speed > FOLLOW_ABOVE_MPS:
+            moving = object_speed > MOVING_MPS
+            if gaps[i] > 0.0 and moving and self._at_pace(object_speed, params, i):
                 return None, self._follow_speed(float(gaps[i]), object_speed, params["speed"])
+            pass_speed = line_speed if moving else PASS_SPEED
             lean = 1.0 if low + high >= 2.0 * obstacle else -1.0
             near_side, far_side = obstacle + lean * clearance, obstacle - lean * clearance
             if abs(near_side) <= self._room:
-                return near_side, PASS_SPEED
-            crossable = object_speed <= MOVING_MPS or gaps[i] >= CROSS_GAP_M
+                return near_side, pass_speed
+            crossable = not moving or gaps[i] >= CROSS_GAP_M
             if abs(far_side) <= self._room and crossable:
-                return far_side, PASS_SPEED
+                return far_side, pass_speed
             follow = max(object_speed, FOLLOW_MIN_SPEED)
             return float(np.clip(near_side, -self._room, self._room)), follow
         return None
@@ -304,6 +325,26 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         room = gap - FOLLOW_MIN_GAP_M - FOLLOW_REACTION_S * speed
         braking = math.sqrt(max(0.0, leader_speed**2 + 2.0 * self.line.limits.max_brake * room))
         return max(FOLLOW_MIN_SPEED, min(closing, braking))
+
+    def _at_pace(self, speed: float, params: dict[str, Any], i: int) -> bool:
+        """Whether object ``i``, a car moving at ``speed``, is too fast to pass (and to be
+        followed instead): near its line's pace, or the race has just started."""
+        if self._steps <= START_FOLLOW_STEPS:
+            return True
+        return speed >= PASS_PACE * self._line_pace_near(params["objects_location"][i])
+
+    def _line_pace_near(self, point: Any) -> float:
+        """The lowest profile speed over the :data:`PACE_WINDOW_M` of racing line up to the
+        line point nearest ``point`` (x, y): what a car there at full pace drives at least
+        (leaving a corner it is still accelerating to the profile's speed)."""
+        line = self.line
+        spot = np.asarray(point, dtype=float)
+        nearest = int(np.argmin(np.sum((line.points - spot) ** 2, axis=1)))
+        here = float(line.arc_length[nearest])
+        back = here - PACE_WINDOW_M
+        back = back % line.length if line.is_loop else max(back, 0.0)
+        start = min(int(np.searchsorted(line.arc_length, back)), len(line.arc_length) - 1)
+        return self._slowest(start, here)
 
     def _line_offset_at(self, arc: float) -> float:
         """The racing line's lateral offset where the centre line is ``arc`` metres long."""
