@@ -91,9 +91,20 @@ class RacerCreated(RacerOut):
 
 
 # ------------------------------------------------------------------ models
+class ModelSuspension(BaseModel):
+    """An event the model was suspended from for breaking its races, and why."""
+
+    event_id: int
+    event_name: str
+    entry_id: int
+    suspended_at: datetime
+    message: str
+
+
 class ModelOut(BaseModel):
     """A model. Owners and admins see everything; others only the public fields of a model
-    entered in an event (``sha256``, ``size`` and ``info`` are then null)."""
+    entered in an event (``sha256``, ``size`` and ``info`` are then null, ``suspensions``
+    empty)."""
 
     id: int
     name: str
@@ -105,6 +116,7 @@ class ModelOut(BaseModel):
     sha256: str | None = None
     size: int | None = None
     info: dict[str, Any] | None = None
+    suspensions: list[ModelSuspension] = []
 
 
 # ------------------------------------------------------------------ events

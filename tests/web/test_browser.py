@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from league.models import Event
+from league.models import Entry, Event, utcnow
 from tests.league.conftest import League
 from tests.league.helpers import create_event, enter, upload
 from tests.web.data import Site, duel, race, record
@@ -237,3 +237,28 @@ def test_model_page_shows_report_history_and_reward_graph_to_its_owner(
     assert "passed" in page.inner_text("#report")
     assert page.eval_on_selector_all("#history tbody tr", "rows => rows.length") >= 3
     assert "without training metrics" in page.inner_text("#metrics-note")
+
+
+def test_model_page_tells_its_owner_which_events_suspended_it(page, league: League) -> None:
+    model_id = upload(league, "bob", 21, name="bob-faulty")["id"]
+    event = create_event(league, name="Suspension Cup")
+    listed = create_event(league, name="Still Racing Cup")
+    entry_id = enter(league, "bob", event["id"], model_id)["entry_id"]
+    enter(league, "bob", listed["id"], model_id)
+    message = f"Model {model_id} was suspended from event {event['id']}: 3 races lost to faults"
+    with league.sessions() as session:  # as league.jobs.faults.suspend_faulty leaves it
+        entry = session.get_one(Entry, entry_id)
+        entry.suspended_at, entry.suspension = utcnow(), message
+        session.commit()
+    with league.client("bob") as client:
+        (mine,) = [m for m in client.get("/api/models").json() if m["id"] == model_id]
+    assert [s["event_name"] for s in mine["suspensions"]] == ["Suspension Cup"]
+    with league.client() as anonymous:  # the public view does not show it
+        assert anonymous.get(f"/api/models/{model_id}").json()["suspensions"] == []
+
+    sign_in(page, league, "bob")
+    page.goto(f"/models/{model_id}")
+    page.wait_for_selector("#suspensions:not([hidden])")
+    shown = page.inner_text("#suspensions")
+    assert "Suspension Cup" in shown and message in shown
+    assert "Still Racing Cup" not in shown

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import re
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import (
     APIRouter,
@@ -19,7 +19,8 @@ from fastapi import (
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import TypeAdapter, ValidationError
-from sqlalchemy import select
+from sqlalchemy import Select, select
+from sqlalchemy.orm import Session
 
 from league import crud
 from league.http.auth import CurrentRacer, OptionalRacer
@@ -30,18 +31,49 @@ from league.http.upload_validation import (
     UploadValidator,
     ValidationBusy,
 )
-from league.models import Model, Racer
-from league.schemas import MAX_ID, ErrorOut, ModelName, ModelOut
+from league.models import Entry, Event, Model, Racer
+from league.schemas import MAX_ID, ErrorOut, ModelName, ModelOut, ModelSuspension
 
 router = APIRouter(prefix="/api/models", tags=["models"])
 ModelId = Annotated[int, Path(ge=1, le=MAX_ID)]
 MODEL_NAME = TypeAdapter(ModelName)
 
 
-def model_out(model: Model, owner_view: bool) -> ModelOut:
-    """The API view of a model: everything for its owner, the public fields otherwise."""
+def suspensions(
+    session: Session, model_ids: list[int] | Select
+) -> dict[int, list[ModelSuspension]]:
+    """Per model id (a list, or a query of ids), the events its entries were suspended from
+    (:mod:`league.jobs.faults`), in one query."""
+    rows = session.execute(
+        select(Entry, Event.name)
+        .join(Event, Entry.event_id == Event.id)
+        .where(Entry.model_id.in_(model_ids), Entry.suspended_at.is_not(None))
+        .order_by(Entry.suspended_at)
+    )
+    found: dict[int, list[ModelSuspension]] = {}
+    for entry, name in rows:
+        found.setdefault(entry.model_id, []).append(
+            ModelSuspension(
+                event_id=entry.event_id,
+                event_name=name,
+                entry_id=entry.id,
+                suspended_at=entry.suspended_at,
+                message=entry.suspension or "",
+            )
+        )
+    return found
+
+
+def model_out(
+    model: Model, owner_view: bool, suspended: list[ModelSuspension] | None = None
+) -> ModelOut:
+    """The API view of a model: everything for its owner (with ``suspended``, the events it
+    was suspended from), the public fields otherwise."""
     info = model.info
-    private = {"sha256": model.sha256, "size": model.size, "info": info} if owner_view else {}
+    private: dict[str, Any] = {}
+    if owner_view:
+        private = {"sha256": model.sha256, "size": model.size, "info": info}
+        private["suspensions"] = suspended or []
     return ModelOut(
         id=model.id,
         name=model.name,
@@ -128,7 +160,9 @@ def list_models(racer: CurrentRacer, session: SessionDep) -> list[ModelOut]:
     query = select(Model).order_by(Model.id.desc())
     if racer.role != "admin":
         query = query.where(Model.owner_id == racer.id)
-    return [model_out(m, owner_view=True) for m in session.scalars(query)]
+    models = list(session.scalars(query))
+    suspended = suspensions(session, query.with_only_columns(Model.id).order_by(None))
+    return [model_out(m, owner_view=True, suspended=suspended.get(m.id)) for m in models]
 
 
 @router.get("/{model_id}", response_model=ModelOut, responses={404: {"model": ErrorOut}})
@@ -136,7 +170,8 @@ def read_model(model_id: ModelId, racer: OptionalRacer, session: SessionDep) -> 
     """A model: in full for its owner or an admin; public fields of an entered model else."""
     model = session.get(Model, model_id)
     if model is not None and _owns(racer, model):
-        return model_out(model, owner_view=True)
+        suspended = suspensions(session, [model.id]).get(model.id)
+        return model_out(model, owner_view=True, suspended=suspended)
     if model is not None and crud.is_entered(session, model.id):
         return model_out(model, owner_view=False)
     raise HTTPException(404, f"Model {model_id} not found.")

@@ -37,6 +37,21 @@ function renderReport(model) {
   list.replaceChildren(...reportRows(model).flatMap(([k, v]) => [Slip.el("dt", {}, k), Slip.el("dd", {}, v)]));
 }
 
+function renderSuspensions(model) {
+  const shown = model.suspensions || [];
+  document.getElementById("suspensions").hidden = !shown.length;
+  document.getElementById("suspension-list").replaceChildren(
+    ...shown.map((s) =>
+      Slip.el(
+        "li",
+        {},
+        Slip.el("a", { href: `/events/${s.event_id}` }, s.event_name),
+        ` (${Slip.date(s.suspended_at)}): ${s.message}`,
+      ),
+    ),
+  );
+}
+
 function renderHistory(races) {
   const table = document.getElementById("history");
   const head = Slip.el("tr", {}, ...["Race", "Event", "Status", "Pos", "Laps", "Best lap", "Total", "Off-track", "Crashes", "When"].map((h) => Slip.el("th", {}, h)));
@@ -138,6 +153,7 @@ async function loadModel() {
     return;
   }
   note.textContent = "";
+  renderSuspensions(model);
   const [races, metrics] = await Promise.all([
     Slip.api(`/api/models/${modelId}/races`),
     Slip.api(`/api/models/${modelId}/metrics`),
