@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import os
 import time
 
 import torch
@@ -32,14 +33,37 @@ def _quiet() -> contextlib.AbstractContextManager:
     return contextlib.redirect_stdout(io.StringIO())
 
 
+def thread_counts(threads: int | None, workers: int, cores: int | None = None) -> tuple[int, int]:
+    """Torch CPU threads ``(while collecting, while updating)``.
+
+    ``threads`` given: that many in both. ``None`` (auto): the update gets every core this
+    process may use (the env workers wait for it), collection the cores the env workers
+    leave free, at least one (the learner's threads then do not fight the workers; on 2
+    cores with 2 workers, two learner threads cut lidar collection by a third,
+    benchmarks/RESULTS.md, "Torch threads").
+    """
+    if threads is not None:
+        return threads, threads
+    cores = cores or len(os.sched_getaffinity(0))
+    return max(1, cores - workers), cores
+
+
 class RacingRunner(OnPolicyRunner):
     """An ``OnPolicyRunner`` driven by its caller: :meth:`start`, then :meth:`iteration` each time.
 
     Writes no checkpoint files (``agents.train`` does) and prints nothing; TensorBoard
-    events go to ``log_dir`` as with rsl-rl's runner.
+    events go to ``log_dir`` as with rsl-rl's runner. ``threads``: torch CPU threads, as
+    :func:`thread_counts` reads it (``None``: auto).
     """
 
-    def __init__(self, env: VecEnv, train_cfg: dict, log_dir: str | None, device: str) -> None:
+    def __init__(
+        self,
+        env: VecEnv,
+        train_cfg: dict,
+        log_dir: str | None,
+        device: str,
+        threads: int | None = None,
+    ) -> None:
         with _quiet():
             super().__init__(env, train_cfg, log_dir=log_dir, device=device)
         # rsl-rl writes the git diff of the repositories listed here (by default its own)
@@ -48,6 +72,7 @@ class RacingRunner(OnPolicyRunner):
         self.logger.git_status_repos.clear()
         self._obs: TensorDict | None = None
         self.timings = (0.0, 0.0)  # the last iteration's (collection, update) seconds
+        self.threads = thread_counts(threads, getattr(env, "num_workers", 0))
 
     def start(self) -> None:
         """What ``learn`` does before its first iteration: observations, train mode, synced
@@ -67,8 +92,10 @@ class RacingRunner(OnPolicyRunner):
         if self._obs is None:
             raise RuntimeError("call start() before iteration()")
         started = time.monotonic()
+        torch.set_num_threads(self.threads[0])
         self._collect_rollout(it)
         collected = time.monotonic()
+        torch.set_num_threads(self.threads[1])
         losses = self.alg.update()
         self.current_learning_iteration = it
         self.timings = (collected - started, time.monotonic() - collected)

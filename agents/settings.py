@@ -94,7 +94,12 @@ class TrainSettings(BaseModel):
         10, description="Pool self-play: snapshot the learner into the pool every N iterations."
     )
     device: str = Field("cpu", description="cpu, cuda or cuda:N.")
-    threads: int = Field(1, description="Torch CPU threads.")
+    threads: int | None = Field(
+        None,
+        description="Torch CPU threads (default: every core for the update, the cores the "
+        "env workers leave free while collecting).",
+        ge=1,
+    )
     recipe: str | None = Field(
         None, description="The recipe the settings were made from (agents/recipes.py)."
     )

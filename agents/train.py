@@ -188,7 +188,7 @@ class Trainer:
         if s.teacher is not None:
             cfg = imitation_config(cfg, s.discrete)
         log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None
-        return RacingRunner(env, cfg, log_dir=log_dir, device=s.device)
+        return RacingRunner(env, cfg, log_dir=log_dir, device=s.device, threads=s.threads)
 
     def _load_weights(self, runner: RacingRunner) -> None:
         if self.resume:
@@ -238,7 +238,6 @@ class Trainer:
 
         ``on_iteration`` receives each finished iteration's statistics.
         """
-        torch.set_num_threads(self.settings.threads)
         torch.manual_seed(self.settings.seed + _rank())
         if self.writes_run_folder:
             self.target.write()

@@ -454,6 +454,11 @@ class RacingVecEnv(VecEnv):
         return results
 
     # ------------------------------------------------------------- rsl-rl API
+    @property
+    def num_workers(self) -> int:
+        """Worker processes stepping the races (0: in-process)."""
+        return len(self._procs)
+
     def get_observations(self) -> TensorDict:
         """The current observations (a fresh TensorDict of sensor groups)."""
         return self._obs.clone()

@@ -2,7 +2,8 @@
 
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
 evaluations or run files) for each ``--device``, ``--workers`` and ``--critic`` value, with
-``--races`` parallel races (default: train's), and prints one table: samples/s end to end,
+``--races`` parallel races and ``--threads`` torch threads (defaults: train's; the table
+shows the threads while collecting / updating), and prints one table: samples/s end to end,
 collection and update seconds per iteration, the update's share, the value loss of the
 last iteration. The first iteration is a warm-up and is not counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
@@ -62,7 +63,7 @@ def measure(
         actor_cfg, critic_cfg, groups = networks.model_configs(preset, sensors, space, critic)
         cfg = hp.to_rsl_rl(env.num_envs, actor_cfg, critic_cfg, groups, args.steps_per_env)
         torch.manual_seed(0)
-        runner = RacingRunner(env, cfg, log_dir=None, device=device)
+        runner = RacingRunner(env, cfg, log_dir=None, device=device, threads=args.threads)
         runner.start()
         collect = update = 0.0
         losses: dict[str, float] = {}
@@ -87,6 +88,7 @@ def measure(
         return {
             "device": device,
             "workers": workers,
+            "threads": "/".join(map(str, runner.threads)),
             "races": env.num_races,
             "preset": preset,
             "critic": critic,
@@ -120,11 +122,12 @@ def main() -> None:
         default=TrainSettings.model_fields["critic"].default,
         help="what the critic reads, comma-separated: privileged,sensors (default: train's)",
     )
-    parser.add_argument("--threads", type=int, default=1, help="torch threads")
+    parser.add_argument(
+        "--threads", type=int, default=None, help="torch threads (default: train's, auto)"
+    )
     parser.add_argument("--profile", action="store_true")
     add_record_option(parser)
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
     hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
     rows = [
         measure(args, device, int(w), critic, hp or Hyperparameters())
@@ -133,17 +136,18 @@ def main() -> None:
         for critic in args.critic.split(",")
     ]
     columns = (
-        "device", "workers", "races", "preset", "critic", "samples/it", "minibatches/it",
+        "device", "workers", "threads", "races", "preset", "critic", "samples/it", "minibatches/it",
         "samples/s", "collect s/it", "update s/it", "update share", "value loss",
     )  # fmt: skip
     table = ResultTable(
-        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrrllrrrrrrr"
+        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrrrllrrrrrrr"
     )
     for r in rows:
         total = r["collect_s"] + r["update_s"]
         table.add_row(
             str(r["device"]),
             str(r["workers"]),
+            r["threads"],
             str(r["races"]),
             str(r["preset"]),
             str(r["critic"]),

@@ -5,8 +5,9 @@ from __future__ import annotations
 import math
 
 import pytest
+import torch
 
-from agents.runner import NonFiniteEnvError, RacingRunner
+from agents.runner import NonFiniteEnvError, RacingRunner, thread_counts
 from tests.agents.bandit import Bandit, ppo_config
 
 STEPS = 8
@@ -59,3 +60,45 @@ def test_nan_check_follows_the_config_switch():
     runner.start()
     losses = runner.iteration(0)
     assert env.steps == STEPS and math.isnan(losses["value"])
+
+
+class _ThreadsSeen(Bandit):
+    """A bandit that records torch's thread count at every step (collection)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.threads: set[int] = set()
+
+    def step(self, actions):
+        self.threads.add(torch.get_num_threads())
+        return super().step(actions)
+
+
+@pytest.mark.parametrize(("threads", "workers", "cores", "expected"), [
+    (None, 0, 2, (2, 2)),  # in-process: every core in both phases
+    (None, 2, 2, (1, 2)),  # two env workers: one learner thread beside them, both to update
+    (None, 3, 16, (13, 16)),
+    (None, 8, 4, (1, 4)),
+    (1, 2, 16, (1, 1)),  # an explicit count is kept in both phases
+])  # fmt: skip
+def test_thread_counts_give_the_update_every_core_and_collection_what_workers_leave(
+    threads: int | None, workers: int, cores: int, expected: tuple[int, int]
+) -> None:
+    assert thread_counts(threads, workers, cores) == expected
+
+
+def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> None:
+    before = torch.get_num_threads()
+    env = _ThreadsSeen()
+    monkeypatch.setattr("agents.runner.thread_counts", lambda threads, workers: (1, 2))
+    updates: list[int] = []
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None)
+    real_update = runner.alg.update
+    monkeypatch.setattr(
+        runner.alg, "update", lambda: updates.append(torch.get_num_threads()) or real_update()
+    )
+    try:
+        runner.learn(2)
+    finally:
+        torch.set_num_threads(before)
+    assert env.threads == {1} and updates == [2, 2]
