@@ -4,9 +4,10 @@ the league's rules; print the results (or win rates over several seeds) and writ
 Model files are validated as the league validates an upload (never unpickled or imported),
 then each drives a car with the sensors and action space it declares; a model that faults
 in the race (NaN or inf, onnxruntime failing on a real frame) is out of that race with the
-reason, as in the league. ``--bots N`` adds N cars driven by the league's bot (the passing
-pursuit driver). With ``--seeds K`` the cars race K seeded races, the grid rotating one
-slot a race (so with two cars each starts in front half the time).
+reason, as in the league. ``--bots N`` adds N cars driven by the passing pursuit driver
+(the imitation teacher) with continuous actions up to 4 m/s. With ``--seeds K`` the cars
+race K seeded races, the grid rotating one slot a race (so with two cars each starts in
+front half the time).
 """
 
 from __future__ import annotations
@@ -60,14 +61,16 @@ def _model_race(
     models: list[tuple[str, Any]], bots: int, rules: dict[str, Any]
 ) -> tuple[RaceConfig, RaceRunner]:
     """The first race's config and a function that races any rotation of it."""
-    from arena.config import BotConfig, ObstacleConfig
+    from arena.actions import ContinuousActionSpace
+    from arena.config import BotConfig, CarConfig, ObstacleConfig
     from arena.pursuit import PassingPursuitPolicy
     from arena.race import StepGuard, run_race
     from league.jobs.evaluation import model_car
     from submissions import ModelFault
 
     cars = [model_car(name, policy.info.model_dump(mode="json")) for name, policy in models]
-    cars += [{"name": f"bot{i}"} for i in range(bots)]
+    racing = ContinuousActionSpace()
+    cars += [CarConfig(name=f"bot{i}", action_space=racing) for i in range(bots)]
     defaults = {
         "object_avoidance": ("obstacles", ObstacleConfig),
         "head_to_bot": ("bots", BotConfig),
@@ -95,7 +98,8 @@ def race_command(
         typer.Option(help="A model file (.zip) to race; repeat for several, head to head."),
     ] = None,
     bots: Annotated[
-        int, typer.Option(help="Cars driven by the league's bot beside the models.", min=0)
+        int,
+        typer.Option(help="Cars driven by the passing pursuit driver, beside the models.", min=0),
     ] = 0,
     track: Annotated[
         str | None,
@@ -120,7 +124,9 @@ def race_command(
     ] = "bot",
     speed: Annotated[float, typer.Option(help="Target speed of the bot driver, m/s.")] = 1.5,
     laps: Annotated[int, typer.Option(help="Laps to race.")] = 3,
-    sensors: Annotated[str, typer.Option(help="Comma-separated sensors.")] = "lidar",
+    sensors: Annotated[
+        str, typer.Option(help="Comma-separated sensors of the built-in drivers' cars.")
+    ] = "lidar",
     time_limit: Annotated[float, typer.Option(help="Race time limit, simulated seconds.")] = 180.0,
     seed: Annotated[int, typer.Option(help="Race seed (the first, with --seeds).")] = 0,
     seeds: Annotated[
@@ -165,11 +171,14 @@ def race_command(
             race = _builtin_race(config, driver, speed, seed)
     except (ConfigError, ValueError, KeyError) as exc:
         raise _fail(err, str(exc)) from None
-    results = [
-        _race_once(rotated(config, seed + k, k), race, _folder(out, seeds, seed + k), gif, err,
-                   quiet=as_json, label=f"race {k + 1}/{seeds}")
-        for k in range(seeds)
-    ]  # fmt: skip
+    try:
+        results = [
+            _race_once(rotated(config, seed + k, k), race, _folder(out, seeds, seed + k), gif,
+                       err, quiet=as_json, label=f"race {k + 1}/{seeds}")
+            for k in range(seeds)
+        ]  # fmt: skip
+    except (ConfigError, ValueError) as exc:
+        raise _fail(err, str(exc)) from None
     if as_json:
         docs = [{k: v for k, v in r.to_dict().items() if k != "trace"} for r in results]
         typer.echo(json.dumps(docs[0] if seeds == 1 else docs))
@@ -215,7 +224,7 @@ def _folder(out: Path | None, seeds: int, seed: int) -> Path | None:
 
 def _race_once(
     config: RaceConfig,
-    race: Any,
+    race: RaceRunner,
     out: Path | None,
     gif: bool,
     err: Console,

@@ -39,17 +39,17 @@ function renderReport(model) {
 
 function renderSuspensions(model) {
   const shown = model.suspensions || [];
-  document.getElementById("suspensions").hidden = !shown.length;
-  document.getElementById("suspension-list").replaceChildren(
-    ...shown.map((s) =>
-      Slip.el(
-        "li",
-        {},
-        Slip.el("a", { href: `/events/${s.event_id}` }, s.event_name),
-        ` (${Slip.date(s.suspended_at)}): ${s.message}`,
-      ),
+  const section = document.getElementById("suspensions");
+  section.hidden = !shown.length;
+  const items = shown.map((s) =>
+    Slip.el(
+      "li",
+      {},
+      Slip.el("a", { href: `/events/${s.event_id}` }, s.event_name),
+      ` (${Slip.date(s.suspended_at)}): ${s.message}`,
     ),
   );
+  section.replaceChildren(...(shown.length ? [Slip.el("h2", {}, "Suspended from events"), Slip.el("ul", {}, ...items)] : []));
 }
 
 function renderHistory(races) {
