@@ -90,11 +90,11 @@ RECIPES: dict[str, Recipe] = {
         ),
         Recipe(
             name="head_to_bot",
-            summary="beginner_loop, camera + lidar, continuous 0.5-3 m/s; imitates the "
-            "pursuit driver among bot cars",
+            summary="slipstream_speedway (DeepRacer's width, room to pass), camera + lidar, "
+            "continuous 0.5-3 m/s; imitates the pursuit driver among bot cars",
             options={
                 "race_type": "head_to_bot",
-                "track": "beginner_loop",
+                "track": "slipstream_speedway",
                 "sensors": "camera,lidar",
                 "action_space": "continuous:-30:30:0.5:3",
                 "reward_fn": "head_to_head",
