@@ -81,7 +81,16 @@ def solo_lap(model: Any, car: CarConfig, track: str, laps: int) -> float | None:
     return mean(totals) / laps if totals else None
 
 
-def rivals(track_name: str, car: CarConfig, pace: float, field: list[Path]) -> list[Heat]:
+def model_heats(field: list[Path]) -> list[Heat]:
+    """A heat per other model file, each loaded (and validated) once for every track."""
+    heats = []
+    for path in field:
+        other = load_policy(path, non_finite="raise", name=f"car {RIVAL}")
+        heats.append(Heat(path.stem, model_car(RIVAL, other.info.model_dump(mode="json")), other))
+    return heats
+
+
+def rivals(track_name: str, pace: float, models: list[Heat]) -> list[Heat]:
     """The field on one track: paced followers, the other models, the teacher."""
     track = get_track(track_name)
     scripted = CarConfig(name=RIVAL, action_space=ContinuousActionSpace())  # 0.5-4 m/s
@@ -90,9 +99,7 @@ def rivals(track_name: str, car: CarConfig, pace: float, field: list[Path]) -> l
         Heat(f"follower {p:.0%}", scripted, LaneFollowerPolicy(track, space, p * pace))
         for p in PACES
     ]
-    for path in field:
-        other = load_policy(path, non_finite="raise", name=f"car {RIVAL}")
-        heats.append(Heat(path.stem, model_car(RIVAL, other.info.model_dump(mode="json")), other))
+    heats += models
     heats.append(Heat("teacher", scripted, PassingPursuitPolicy(track, space)))
     return heats
 
@@ -155,6 +162,7 @@ def main() -> None:
         model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
         car = model_car(ME, model.info.model_dump(mode="json"))
     subject = "the teacher" if args.teacher else args.model.name
+    others = model_heats(field)
     columns = ["track", "rival", "wins from behind", "wins from ahead", "overtakes/race",
                "at-fault/race", "s/lap lost behind"]  # fmt: skip
     table = ResultTable(
@@ -175,7 +183,7 @@ def main() -> None:
                 if solo
                 else f"{track}: the model did not finish alone; followers paced at 1 m/s"
             )
-            heats = rivals(track, car, pace, field)
+            heats = rivals(track, pace, others)
             task = progress.add_task(track, total=len(heats) * args.races)
             for heat in heats:
                 results = []

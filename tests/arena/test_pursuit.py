@@ -162,6 +162,29 @@ def test_passing_pursuit_gets_past_bots_on_the_narrow_loop() -> None:
     assert sum(car.crash_count + car.off_track_count for car in cars) <= 10
 
 
+RACING = "continuous:-30:30:0.5:4"
+
+
+def _duel(track_name: str, leader, laps: int, seed: int):
+    """Head to model on ``track_name`` with the races' noise: ``leader(track, space)``
+    drives ``car0`` in front, the passing driver ``car1`` 0.8 m back; both results."""
+    space = parse_action_space_spec(RACING)
+    track = get_track(track_name)
+    config = arena.make_config(
+        track=track_name,
+        race_type="head_to_model",
+        action_space=space,
+        laps=laps,
+        seed=seed,
+        time_limit_s=60,
+        sensors=("sector_lidar",),
+        variation=SeedVariation(shuffle_grid=False),  # car0 in front, car1 0.8 m back
+    )
+    policies = {"car0": leader(track, space), "car1": PassingPursuitPolicy(track, space)}
+    race = run_race(config, policies, record_trace=False)
+    return race.car("car0"), race.car("car1")
+
+
 def test_passing_pursuit_follows_a_car_as_fast_as_itself_without_losing_time() -> None:
     """Head to model on the 0.76 m loop, the passing driver on the grid's rear slot (0.8 m
     back) behind a plain pursuit car of the same speed, eight seeded races with the
@@ -169,26 +192,9 @@ def test_passing_pursuit_follows_a_car_as_fast_as_itself_without_losing_time() -
     so it finishes within 0.3 s of the leader (each car's laps are timed from its own
     slot). Steering beside the leader lost 0.7-1.0 s in every race. Measured over the
     eight: no collision, 0.07-0.2 s behind."""
-    space = parse_action_space_spec("continuous:-30:30:0.5:4")
-    track = get_track(TRACK)
     lost, incidents = [], 0
     for seed in range(8):
-        config = arena.make_config(
-            track=TRACK,
-            race_type="head_to_model",
-            action_space=space,
-            laps=3,
-            seed=seed,
-            time_limit_s=60,
-            sensors=("sector_lidar",),
-            variation=SeedVariation(shuffle_grid=False),  # car0 in front, car1 0.8 m back
-        )
-        policies = {
-            "car0": PurePursuitPolicy(track, space),
-            "car1": PassingPursuitPolicy(track, space),
-        }
-        race = run_race(config, policies, record_trace=False)
-        leader, follower = race.car("car0"), race.car("car1")
+        leader, follower = _duel(TRACK, PurePursuitPolicy, laps=3, seed=seed)
         assert follower.laps == 3, seed
         if follower.crash_count + follower.off_track_count:
             incidents += 1
@@ -213,25 +219,12 @@ def test_passing_pursuit_passes_a_slower_racing_car_on_a_real_width_track() -> N
     it passes in every race, cleanly, and loses little to the pass. With the old rule
     (follow any car over 1.2 m/s) it sat behind for the whole race, 3.1 s a lap slower
     (benchmarks/RESULTS.md, "The gauntlet on real-width tracks")."""
-    space = parse_action_space_spec("continuous:-30:30:0.5:4")
-    track = get_track("grand_tour")
+
+    def held_to_2_mps(track, space):
+        return LaneFollowerPolicy(track, space, 2.0)
+
     for seed in range(3):
-        config = arena.make_config(
-            track="grand_tour",
-            race_type="head_to_model",
-            action_space=space,
-            laps=1,
-            seed=seed,
-            time_limit_s=60,
-            sensors=("sector_lidar",),
-            variation=SeedVariation(shuffle_grid=False),  # car0 in front, car1 0.8 m back
-        )
-        policies = {
-            "car0": LaneFollowerPolicy(track, space, 2.0),
-            "car1": PassingPursuitPolicy(track, space),
-        }
-        race = run_race(config, policies, record_trace=False)
-        slow, passer = race.car("car0"), race.car("car1")
+        slow, passer = _duel("grand_tour", held_to_2_mps, laps=1, seed=seed)
         assert passer.overtakes >= 1 and slow.times_overtaken >= 1, seed
         assert passer.at_fault_collisions == 0 and passer.crash_count == 0, seed
         assert passer.finish_position == 1 and passer.total_time < 20.0, seed

@@ -20,7 +20,7 @@ from onnx import TensorProto, helper, numpy_helper
 from sqlalchemy import select
 
 import arena
-from arena.race import run_race
+from arena.race import RaceResult, run_race
 from league.jobs.evaluation import CarPlan, RacePlan, policies
 from league.jobs.scheduler import due_rounds
 from league.jobs.worker import Worker
@@ -170,22 +170,32 @@ def narrow_on_real_frames() -> bytes:
     return _archive(nodes, inits)
 
 
-def test_a_model_onnxruntime_cannot_run_or_that_narrows_its_output_is_out() -> None:
-    for hostile in (unrunnable_on_real_frames(), narrow_on_real_frames()):
-        assert validate(hostile).ok  # both pass validation on random frames
+def _race_with_a_bot(
+    models: tuple[bytes, bytes], time_limit_s: float, step_budget_ms: float | None = None
+) -> tuple[list[str], RaceResult]:
+    """A one-lap camera race of two model files and a pursuit bot, guarded as the league's
+    races are; the car names (models first) and the result."""
     config = arena.make_config(
-        race_type="head_to_model", sensors=("camera",), num_cars=3, laps=1, time_limit_s=8.0
+        race_type="head_to_model",
+        sensors=("camera",),
+        num_cars=3,
+        laps=1,
+        time_limit_s=time_limit_s,
     )
     names = [c.name for c in config.cars]
-    plan = RacePlan(
-        config,
-        (
-            CarPlan(names[0], 1, model=unrunnable_on_real_frames()),
-            CarPlan(names[1], 2, model=narrow_on_real_frames()),
-            CarPlan(names[2], None, bot="pursuit"),
-        ),
+    cars = (
+        CarPlan(names[0], 1, model=models[0]),
+        CarPlan(names[1], 2, model=models[1]),
+        CarPlan(names[2], None, bot="pursuit"),
     )
-    result = run_race(plan.config, policies(plan), guard=plan.guard())
+    plan = RacePlan(config, cars, step_budget_ms=step_budget_ms)
+    return names, run_race(plan.config, policies(plan), guard=plan.guard())
+
+
+def test_a_model_onnxruntime_cannot_run_or_that_narrows_its_output_is_out() -> None:
+    hostile = (unrunnable_on_real_frames(), narrow_on_real_frames())
+    assert all(validate(model).ok for model in hostile)  # both pass on random frames
+    names, result = _race_with_a_bot(hostile, time_limit_s=8.0)
     unrunnable, narrow, bot = (result.car(n) for n in names)
     assert unrunnable.status == "dnf" and unrunnable.dnf_reason is not None
     assert unrunnable.dnf_reason.startswith(
@@ -202,20 +212,8 @@ def test_a_model_onnxruntime_cannot_run_or_that_narrows_its_output_is_out() -> N
 
 
 def test_a_car_that_faults_on_real_frames_is_out_and_the_other_races_on() -> None:
-    config = arena.make_config(
-        race_type="head_to_model", sensors=("camera",), num_cars=3, laps=1, time_limit_s=12.0
-    )
-    names = [c.name for c in config.cars]
-    plan = RacePlan(
-        config,
-        (
-            CarPlan(names[0], 1, model=inf_on_real_frames()),
-            CarPlan(names[1], 2, model=slow_on_real_frames()),
-            CarPlan(names[2], None, bot="pursuit"),
-        ),
-        step_budget_ms=BUDGET_MS,
-    )
-    result = run_race(plan.config, policies(plan), guard=plan.guard())
+    hostile = (inf_on_real_frames(), slow_on_real_frames())
+    names, result = _race_with_a_bot(hostile, time_limit_s=12.0, step_budget_ms=BUDGET_MS)
     inf, slow, bot = (result.car(n) for n in names)
     assert (inf.status, inf.dnf_reason) == (
         "dnf",
