@@ -162,6 +162,8 @@ def train(
         if ctx.get_parameter_source(name).name != "DEFAULT"  # typer's own click enum
     }
     given["device"] = _device(settings["device"])
+    if hyperparameters is not None:
+        given.setdefault("grow_batch", False)  # an explicit file is honoured as written
     try:
         run_settings = _settings(out, recipe, clone, resume, given)
         if run_settings.minutes is None and run_settings.iterations is None and not resume:

@@ -22,6 +22,10 @@ GAE_LAMBDA = 0.95
 # rsl-rl collects a fixed number of steps per slot, not whole episodes: an "episode" of
 # num_episodes_between_training is converted to steps with this estimate.
 STEPS_PER_EPISODE_ESTIMATE = 64
+# The slots (parallel races x learner cars) whose iteration DeepRacer's numbers describe when
+# the iteration grows with the machine (``to_rsl_rl(grow=True)``): a 2-core machine's
+# default of 2 workers with 2 races each, 320 steps per slot.
+REFERENCE_SLOTS = 4
 VALUE_LOSS_COEF = 1.0
 # rsl-rl's PPO, learning from rewards scaled by the running std of the return.
 PPO_CLASS = "agents.return_scale:ReturnScaledPPO"
@@ -97,10 +101,22 @@ class Hyperparameters(BaseModel):
         critic: dict[str, Any],
         obs_groups: dict[str, list[str]],
         num_steps_per_env: int | None = None,
+        grow: bool = False,
     ) -> dict[str, Any]:
-        """rsl-rl's ``OnPolicyRunner`` config for these hyperparameters and models."""
-        steps = num_steps_per_env or self.steps_per_env(num_envs)
-        mini_batches = max(1, round(steps * num_envs / self.batch_size))
+        """rsl-rl's ``OnPolicyRunner`` config for these hyperparameters and models.
+
+        As written, an iteration holds about ``num_episodes_between_training`` episodes
+        whatever ``num_envs``, in minibatches of ``batch_size``. ``grow`` (more than
+        :data:`REFERENCE_SLOTS` slots, no ``num_steps_per_env``): every slot collects what a
+        slot of the reference machine does, so the iteration grows with ``num_envs``, and
+        so does each minibatch: the update still takes ``num_epochs`` passes of the same
+        number of gradient steps, each sample used ``num_epochs`` times, as DeepRacer's
+        numbers say; only the minibatch, and the samples per iteration, are larger.
+        """
+        grows = grow and num_steps_per_env is None and num_envs > REFERENCE_SLOTS
+        steps = num_steps_per_env or self.steps_per_env(REFERENCE_SLOTS if grows else num_envs)
+        slots = REFERENCE_SLOTS if grows else num_envs
+        mini_batches = max(1, round(steps * slots / self.batch_size))
         return {
             "num_steps_per_env": steps,
             "obs_groups": obs_groups,

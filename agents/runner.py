@@ -8,20 +8,37 @@ and :meth:`~RacingRunner.iteration`, which call rsl-rl's own pieces (the algorit
 ``act``/``process_env_step``/``compute_returns``/``update``, the logger, ``check_nan``) in
 ``learn``'s order. Those pieces are rsl-rl internals: ``pyproject.toml`` pins rsl-rl-lib
 to 5.5.x for them.
+
+A PPO runner may overlap the two halves of an iteration (``sync=False``): the learner
+updates on the last rollout in a thread while the env workers collect the next one with a
+copy of the policy taken before that update (:class:`Behaviour`). That rollout is
+therefore one update behind the policy that learns from it, which the update corrects as
+decoupled PPO does (:meth:`RacingRunner._rebase_on_proximal`); :attr:`RacingRunner.staleness`
+is the mean ``|pi_prox / mu - 1|`` it corrected. benchmarks/RESULTS.md, "Overlapped
+collection", gives figures.
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
 import io
 import os
+import threading
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
 
 import torch
 from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import check_nan
 from tensordict import TensorDict
+
+# Largest weight of a sample's advantage, pi_prox / mu, in an overlapped update: a bound
+# on the variance one rare action of the collecting policy can add.
+MAX_BEHAVIOUR_WEIGHT = 2.0
 
 
 class NonFiniteEnvError(ValueError):
@@ -48,12 +65,85 @@ def thread_counts(threads: int | None, workers: int, cores: int | None = None) -
     return max(1, cores - workers), cores
 
 
+@dataclass(frozen=True)
+class IterationTimings:
+    """Seconds of one iteration: its wall time, collecting and updating (which overlap
+    unless the runner is synchronous)."""
+
+    wall: float = 0.0
+    collect: float = 0.0
+    update: float = 0.0
+
+    @property
+    def collect_wait(self) -> float:
+        """Share of the wall time the env workers had nothing to collect."""
+        return max(0.0, self.wall - self.collect) / self.wall if self.wall else 0.0
+
+    @property
+    def update_wait(self) -> float:
+        """Share of the wall time no update ran."""
+        return max(0.0, self.wall - self.update) / self.wall if self.wall else 0.0
+
+
+class Behaviour:
+    """The algorithm as the rollout collector sees it: rsl-rl's own ``act``,
+    ``process_env_step`` and ``compute_returns`` on a copy of the actor and critic, with
+    its own transition and storage, so the learner can update the originals meanwhile.
+
+    Everything else (gamma, lambda, the return scale's running statistics, which only
+    collection changes) is the algorithm's own.
+    """
+
+    def __init__(self, alg: object) -> None:
+        self.alg = copy.copy(alg)
+        self.alg.actor = copy.deepcopy(alg.actor)
+        self.alg.critic = copy.deepcopy(alg.critic)
+        self.alg.storage = copy.deepcopy(alg.storage)
+        self.alg.transition = type(alg.transition)()
+        for model in (self.alg.actor, self.alg.critic):
+            model.requires_grad_(False)
+
+    def sync(self, alg: object) -> None:
+        """Take the learner's current weights (and observation normalisers)."""
+        with torch.no_grad():
+            self.alg.actor.load_state_dict(alg.actor.state_dict())
+            self.alg.critic.load_state_dict(alg.critic.state_dict())
+
+    def swap_storage(self, alg: object) -> None:
+        """Hand the collected rollout to the learner and take its emptied storage."""
+        alg.storage, self.alg.storage = self.alg.storage, alg.storage
+
+
+class _Background:
+    """``fn()`` run in a thread; :meth:`result` joins it and re-raises what it raised."""
+
+    def __init__(self, fn: Callable[[], Any]) -> None:
+        self._result: Any = None
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(fn,), name="ppo-update")
+        self._thread.start()
+
+    def _run(self, fn: Callable[[], Any]) -> None:
+        try:
+            self._result = fn()
+        except BaseException as exc:  # re-raised in the caller's thread
+            self._error = exc
+
+    def result(self) -> Any:
+        """``fn``'s return value, once the thread has ended."""
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._result
+
+
 class RacingRunner(OnPolicyRunner):
     """An ``OnPolicyRunner`` driven by its caller: :meth:`start`, then :meth:`iteration` each time.
 
     Writes no checkpoint files (``agents.train`` does) and prints nothing; TensorBoard
     events go to ``log_dir`` as with rsl-rl's runner. ``threads``: torch CPU threads, as
-    :func:`thread_counts` reads it (``None``: auto).
+    :func:`thread_counts` reads it (``None``: auto). ``sync``: collect, then update, as
+    rsl-rl does; otherwise (PPO only) the update overlaps the next rollout (module docstring).
     """
 
     def __init__(
@@ -63,6 +153,7 @@ class RacingRunner(OnPolicyRunner):
         log_dir: str | None,
         device: str,
         threads: int | None = None,
+        sync: bool = False,
     ) -> None:
         with _quiet():
             super().__init__(env, train_cfg, log_dir=log_dir, device=device)
@@ -71,8 +162,18 @@ class RacingRunner(OnPolicyRunner):
         # project's diff, which has no place in a run folder.
         self.logger.git_status_repos.clear()
         self._obs: TensorDict | None = None
-        self.timings = (0.0, 0.0)  # the last iteration's (collection, update) seconds
-        self.threads = thread_counts(threads, getattr(env, "num_workers", 0))
+        self.timings = IterationTimings()  # the last iteration's
+        self.staleness = 0.0  # the last update's mean |ratio - 1| at its start (overlapped)
+        workers = getattr(env, "num_workers", 0)
+        self.overlapped = not sync and hasattr(self.alg, "critic")  # imitation runs in order
+        if self.overlapped:
+            # Collection and update run at once: both get the cores the workers leave free.
+            free = thread_counts(threads, max(1, workers))[0]
+            self.threads = (free, free)
+            self._behaviour = Behaviour(self.alg)
+        else:
+            self.threads = thread_counts(threads, workers)
+        self._pending = False  # the learner's storage holds a rollout not yet learned from
 
     def start(self) -> None:
         """What ``learn`` does before its first iteration: observations, train mode, synced
@@ -82,24 +183,21 @@ class RacingRunner(OnPolicyRunner):
         if self.is_distributed:
             self.alg.broadcast_parameters()
         self.logger.init_logging_writer()
+        self._pending = False
 
     def iteration(self, it: int) -> dict[str, float]:
-        """One PPO iteration (rollout, update, TensorBoard scalars); its mean losses.
+        """One PPO iteration (a rollout and an update, TensorBoard scalars); its mean losses.
 
-        Raises :class:`NonFiniteEnvError`, naming ``it``, when the config's
-        ``check_for_nan`` is on and the environment returns NaN.
+        Overlapped, the update learns from the rollout collected during the iteration
+        before (the first iteration collects one more to start), and the rollout collected
+        now waits for the next iteration. Raises :class:`NonFiniteEnvError`, naming ``it``,
+        when the config's ``check_for_nan`` is on and the environment returns NaN.
         """
         if self._obs is None:
             raise RuntimeError("call start() before iteration()")
-        started = time.monotonic()
-        torch.set_num_threads(self.threads[0])
-        self._collect_rollout(it)
-        collected = time.monotonic()
-        torch.set_num_threads(self.threads[1])
-        losses = self.alg.update()
+        losses = self._overlapped_iteration(it) if self.overlapped else self._sync_iteration(it)
         self.current_learning_iteration = it
-        self.timings = (collected - started, time.monotonic() - collected)
-        self._log(it, *self.timings, losses)
+        self._log(it, self.timings.collect, self.timings.update, losses)
         return losses
 
     def learn(self, num_learning_iterations: int) -> None:
@@ -109,20 +207,95 @@ class RacingRunner(OnPolicyRunner):
         for it in range(first, first + num_learning_iterations):
             self.iteration(it)
 
-    def _collect_rollout(self, it: int) -> None:
-        """``num_steps_per_env`` steps of every slot, then the returns."""
+    def _sync_iteration(self, it: int) -> dict[str, float]:
+        """Collect with the current policy, then update on that rollout."""
+        started = time.monotonic()
+        torch.set_num_threads(self.threads[0])
+        self._collect_rollout(it, self.alg)
+        collected = time.monotonic()
+        torch.set_num_threads(self.threads[1])
+        losses = self.alg.update()
+        done = time.monotonic()
+        self.timings = IterationTimings(done - started, collected - started, done - collected)
+        return losses
+
+    def _overlapped_iteration(self, it: int) -> dict[str, float]:
+        """Update on the pending rollout in a thread while the next one is collected."""
+        torch.set_num_threads(self.threads[0])
+        if not self._pending:  # the pipeline's first rollout: nothing to overlap it with
+            self._behaviour.sync(self.alg)
+            self._collect_behind(it)
+            self._behaviour.swap_storage(self.alg)
+        started = time.monotonic()
+        self._behaviour.sync(self.alg)
+        update = _Background(self._timed_update)
+        try:
+            self._collect_behind(it)
+            collected = time.monotonic()
+        finally:
+            losses, update_s = update.result()  # also on Ctrl-C: no update left running
+        self._behaviour.swap_storage(self.alg)
+        self._pending = True
+        done = time.monotonic()
+        self.timings = IterationTimings(done - started, collected - started, update_s)
+        return losses
+
+    def _collect_behind(self, it: int) -> None:
+        """A rollout with the behaviour policy, whole on the device before the learner reads it."""
+        self._collect_rollout(it, self._behaviour.alg)
+        if self.device.startswith("cuda"):
+            torch.cuda.current_stream().synchronize()
+
+    def _timed_update(self) -> tuple[dict[str, float], float]:
+        """The update (in the update thread): its losses and seconds; :attr:`staleness` first."""
+        started = time.monotonic()
+        stream = torch.cuda.Stream() if self.device.startswith("cuda") else None
+        with torch.cuda.stream(stream) if stream else contextlib.nullcontext():
+            self.staleness = self._rebase_on_proximal()
+            losses = self.alg.update()
+        if stream is not None:
+            stream.synchronize()
+        return losses, time.monotonic() - started
+
+    def _rebase_on_proximal(self) -> float:
+        """Decoupled PPO's correction for a rollout one update behind; the mean ``|w - 1|``.
+
+        ``w = pi_prox(a|s) / mu(a|s)``, the policy starting this update over the one that
+        collected the rollout. The stored log-probabilities become the proximal policy's,
+        so PPO clips around the policy it starts from (as when synchronous), and each
+        advantage is weighted by ``w`` (at most :data:`MAX_BEHAVIOUR_WEIGHT`), so the
+        objective stays an estimate under the collecting policy (Hilton et al., 2021,
+        "Batch size-invariance for policy optimization").
+        """
+        st = self.alg.storage
+        obs, actions = st.observations.flatten(0, 1), st.actions.flatten(0, 1)
+        chunk = 4096
+        with torch.no_grad():
+            parts = []
+            for i in range(0, actions.shape[0], chunk):
+                self.alg.actor(obs[i : i + chunk], stochastic_output=True)
+                parts.append(self.alg.actor.get_output_log_prob(actions[i : i + chunk]))
+            proximal = torch.cat(parts).view_as(st.actions_log_prob)
+            weight = torch.exp(proximal - st.actions_log_prob).clamp(max=MAX_BEHAVIOUR_WEIGHT)
+            st.advantages = st.advantages * weight
+            st.actions_log_prob.copy_(proximal)
+        return float((weight - 1.0).abs().mean())
+
+    def _collect_rollout(self, it: int, alg: object) -> None:
+        """``num_steps_per_env`` steps of every slot with ``alg``'s policy into its
+        storage, then the returns."""
         obs = self._obs
         with torch.inference_mode():
             for _ in range(self.cfg["num_steps_per_env"]):
-                actions = self.alg.act(obs)
+                actions = alg.act(obs)
                 obs, rewards, dones, extras = self.env.step(actions.to(self.env.device))
                 if self.cfg.get("check_for_nan", True):
                     self._check_nan(it, obs, rewards, dones)
                 obs = obs.to(self.device)
                 rewards, dones = rewards.to(self.device), dones.to(self.device)
-                self.alg.process_env_step(obs, rewards, dones, extras)
+                alg.process_env_step(obs, rewards, dones, extras)
                 self.logger.process_env_step(rewards, dones, extras, None)  # no RND
-            self.alg.compute_returns(obs)
+            alg.compute_returns(obs)
         self._obs = obs
 
     @staticmethod

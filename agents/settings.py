@@ -20,7 +20,7 @@ from arena.config import RACE_TYPES, RaceType
 from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
-RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads")
+RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads", "sync")
 # Parallel races per worker process (or in-process) when ``races`` is not given: each step
 # of a worker carries a fixed cost (pipe, pickling, waking it), which two races share
 # (measured by benchmarks/train_profile.py --races).
@@ -100,6 +100,18 @@ class TrainSettings(BaseModel):
         "env workers leave free while collecting).",
         ge=1,
     )
+    sync: bool | None = Field(
+        None,
+        description="Collect, then update, in turn (--sync), or update while the next "
+        "rollout is collected, one update behind (--no-sync). Default: overlapped on a "
+        "GPU, in turn on a CPU.",
+    )
+    grow_batch: bool | None = Field(
+        None,
+        description="Grow the iteration and the minibatch with the number of races "
+        "(the same gradient steps per update). Default: on a GPU, unless "
+        "--hyperparameters or --steps-per-env fixes them.",
+    )
     recipe: str | None = Field(
         None, description="The recipe the settings were made from (agents/recipes.py)."
     )
@@ -112,9 +124,36 @@ class TrainSettings(BaseModel):
         return self.network or default_preset(self.sensors)
 
     @property
+    def overlapped(self) -> bool:
+        """Whether the update runs during the next rollout (:func:`overlapped`)."""
+        return overlapped(self.sync, self.device)
+
+    @property
+    def grows_batch(self) -> bool:
+        """Whether the iteration and minibatch grow with the races (:func:`grows_batch`)."""
+        return grows_batch(self.grow_batch, self.device, self.steps_per_env)
+
+    @property
     def discrete(self) -> bool:
         """Whether the action space is a discrete list."""
         return isinstance(self.action_space, DiscreteActionSpace)
+
+
+def overlapped(sync: bool | None, device: str) -> bool:
+    """``not sync`` when given; else (auto) on a GPU only. On CPU cores the update and the
+    races compete for the same cores: overlapping gained nothing on 2 cores and lost with
+    14 workers on 16 (benchmarks/RESULTS.md, "Overlapped collection")."""
+    if sync is not None:
+        return not sync
+    return device.startswith("cuda")
+
+
+def grows_batch(grow_batch: bool | None, device: str, steps_per_env: int | None) -> bool:
+    """``grow_batch`` when given; else (auto) on a GPU, unless ``steps_per_env`` fixes the
+    rollout. The CLI sets ``grow_batch`` off for an explicit ``hyperparameters.json``."""
+    if grow_batch is not None:
+        return grow_batch
+    return device.startswith("cuda") and steps_per_env is None
 
 
 def settings_path(run_dir: str | Path) -> Path:

@@ -184,11 +184,15 @@ class Trainer:
         actor, critic, groups = networks.model_configs(
             s.preset, s.sensors, s.action_space, s.critic
         )
-        cfg = self.hp.to_rsl_rl(env.num_envs, actor, critic, groups, s.steps_per_env)
+        cfg = self.hp.to_rsl_rl(
+            env.num_envs, actor, critic, groups, s.steps_per_env, grow=s.grows_batch
+        )
         if s.teacher is not None:
             cfg = imitation_config(cfg, s.discrete)
         log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None
-        return RacingRunner(env, cfg, log_dir=log_dir, device=s.device, threads=s.threads)
+        return RacingRunner(
+            env, cfg, log_dir=log_dir, device=s.device, threads=s.threads, sync=not s.overlapped
+        )
 
     def _load_weights(self, runner: RacingRunner) -> None:
         if self.resume:

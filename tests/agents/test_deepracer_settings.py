@@ -113,4 +113,6 @@ def test_a_lidar_metadata_file_trains_a_lidar_model(tmp_path: Path) -> None:
     assert "ignoring learning_rate" in " ".join(result.output.split())
     written = json.loads((run / "model" / "model_metadata.json").read_text())
     assert written["sensor"] == ["LIDAR"]
-    assert json.loads((run / "training_settings.json").read_text())["sensors"] == ["lidar"]
+    stored = json.loads((run / "training_settings.json").read_text())
+    assert stored["sensors"] == ["lidar"]
+    assert stored["grow_batch"] is False  # an explicit file is honoured as written

@@ -75,6 +75,30 @@ def test_hyperparameters_map_to_rsl_rl(tmp_path):
     assert set(written) >= {"e_greedy_value", "epsilon_steps", "exploration_type", "stack_size"}
 
 
+@pytest.mark.parametrize(("slots", "grow", "samples", "minibatch"), [
+    (4, False, 1280, 64),  # DeepRacer's 20 episodes of 64 steps, batch 64
+    (28, False, 1288, 64),  # as written: the iteration stays about 20 episodes
+    (28, True, 8960, 448),  # grown: 320 steps a slot, each minibatch 7 times larger
+    (2, True, 1280, 64),  # fewer slots than the reference machine's: as written
+])  # fmt: skip
+def test_an_iteration_grows_with_the_races_keeping_deepracers_gradient_steps(
+    slots: int, grow: bool, samples: int, minibatch: int
+) -> None:
+    hp = Hyperparameters()  # batch 64, 10 epochs, 20 episodes between training
+    actor, critic, groups = networks.model_configs("dense 256-256", ("lidar",), DISCRETE)
+    cfg = hp.to_rsl_rl(slots, actor, critic, groups, grow=grow)
+    alg = cfg["algorithm"]
+    assert cfg["num_steps_per_env"] * slots == samples
+    assert alg["num_mini_batches"] == 20 and alg["num_learning_epochs"] == 10
+    assert samples / alg["num_mini_batches"] == pytest.approx(minibatch, rel=0.01)
+
+
+def test_a_fixed_rollout_length_does_not_grow():
+    actor, critic, groups = networks.model_configs("dense 256-256", ("lidar",), DISCRETE)
+    cfg = Hyperparameters().to_rsl_rl(28, actor, critic, groups, num_steps_per_env=64, grow=True)
+    assert cfg["num_steps_per_env"] == 64 and cfg["algorithm"]["num_mini_batches"] == 28
+
+
 @pytest.mark.parametrize(
     ("preset", "sensors", "space"),
     [CASES[0], CASES[2], CASES[3]],

@@ -1,14 +1,18 @@
-"""RacingRunner: rsl-rl's PPO one iteration at a time, NaN check, no files of its own."""
+"""RacingRunner: rsl-rl's PPO one iteration at a time, in order or with the update
+overlapping the next rollout, NaN check, no files of its own."""
 
 from __future__ import annotations
 
 import math
+import time
 
 import pytest
 import torch
 
 from agents.runner import NonFiniteEnvError, RacingRunner, thread_counts
 from tests.agents.bandit import Bandit, ppo_config
+
+MODES = pytest.mark.parametrize("sync", [True, False], ids=["sync", "overlapped"])
 
 STEPS = 8
 
@@ -17,12 +21,14 @@ def _cfg(check_for_nan: bool = True) -> dict:
     return ppo_config("GaussianDistribution", steps=STEPS, check_for_nan=check_for_nan)
 
 
-def test_iterations_return_losses_and_log_only_tensorboard(tmp_path, capsys):
+@MODES
+def test_iterations_return_losses_and_log_only_tensorboard(tmp_path, capsys, sync: bool):
     env = Bandit()
-    runner = RacingRunner(env, _cfg(), log_dir=str(tmp_path), device="cpu")
+    runner = RacingRunner(env, _cfg(), log_dir=str(tmp_path), device="cpu", sync=sync)
     runner.start()
     losses = [runner.iteration(it) for it in (4, 5)]
-    assert env.steps == 2 * STEPS
+    # overlapped, the first iteration collects one rollout more, to learn from meanwhile
+    assert env.steps == (2 if sync else 3) * STEPS
     assert all(set(loss) == {"value", "surrogate", "entropy"} for loss in losses)
     assert runner.current_learning_iteration == 5
     runner.logger.writer.flush()
@@ -31,11 +37,78 @@ def test_iterations_return_losses_and_log_only_tensorboard(tmp_path, capsys):
     assert capsys.readouterr().out == ""
 
 
-def test_learn_runs_that_many_iterations_from_start():
+@MODES
+def test_learn_runs_that_many_iterations_from_start(sync: bool):
+    env = Bandit()
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", sync=sync)
+    runner.learn(3)
+    assert env.steps == (3 if sync else 4) * STEPS
+    assert runner.current_learning_iteration == 2
+
+
+@MODES
+def test_both_modes_learn_the_paying_arm(sync: bool):
+    torch.manual_seed(0)
+    env = Bandit()
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", sync=sync)
+    runner.learn(30)
+    obs = env.get_observations()
+    with torch.no_grad():
+        chosen = runner.alg.get_policy()(obs).argmax(dim=-1)
+    assert (chosen == 2).all()
+
+
+def test_overlapped_updates_learn_from_a_rollout_one_update_behind():
+    torch.manual_seed(0)
+    sync = RacingRunner(Bandit(), _cfg(), log_dir=None, device="cpu", sync=True)
+    overlapped = RacingRunner(Bandit(), _cfg(), log_dir=None, device="cpu")
+    assert overlapped.overlapped and not sync.overlapped
+    for runner in (sync, overlapped):
+        runner.learn(4)
+    # the policy that starts an update differs from the one that collected its rollout
+    assert sync.staleness == 0.0 and overlapped.staleness > 0.0
+    t = overlapped.timings
+    assert t.wall > 0 and 0 < t.collect <= t.wall and 0 < t.update <= t.wall
+
+
+def test_a_failing_overlapped_update_stops_training_once_collection_ends(monkeypatch):
     env = Bandit()
     runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu")
-    runner.learn(3)
-    assert env.steps == 3 * STEPS
+    runner.start()
+    runner.iteration(0)
+
+    def broken() -> dict[str, float]:
+        raise RuntimeError("update broke")
+
+    monkeypatch.setattr(runner.alg, "update", broken)
+    steps = env.steps
+    with pytest.raises(RuntimeError, match="update broke"):
+        runner.iteration(1)
+    assert env.steps == steps + STEPS  # the rollout beside it was collected whole
+
+
+def test_an_interrupted_rollout_waits_for_the_update_beside_it(monkeypatch):
+    env = Bandit()
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu")
+    runner.start()
+    runner.iteration(0)
+    finished: list[bool] = []
+    real_update = runner.alg.update
+
+    def slow_update() -> dict[str, float]:
+        time.sleep(0.2)
+        losses = real_update()
+        finished.append(True)
+        return losses
+
+    def interrupted(actions):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner.alg, "update", slow_update)
+    monkeypatch.setattr(env, "step", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        runner.iteration(1)
+    assert finished == [True]  # no update is left changing the weights after Ctrl-C
 
 
 def test_iteration_needs_start():
@@ -45,7 +118,9 @@ def test_iteration_needs_start():
 
 
 def test_nan_from_the_env_stops_training_naming_the_iteration():
-    runner = RacingRunner(Bandit(nan_at_step=STEPS + 3), _cfg(), log_dir=None, device="cpu")
+    runner = RacingRunner(
+        Bandit(nan_at_step=STEPS + 3), _cfg(), log_dir=None, device="cpu", sync=True
+    )
     runner.start()
     runner.iteration(7)
     with pytest.raises(NonFiniteEnvError, match=r"^iteration 8: The rewards .* NaN"):
@@ -56,7 +131,7 @@ def test_nan_check_follows_the_config_switch():
     env = Bandit(nan_at_step=3)
     cfg = _cfg(check_for_nan=False)
     cfg["algorithm"].update(num_learning_epochs=1, num_mini_batches=1)  # one step on the NaN
-    runner = RacingRunner(env, cfg, log_dir=None, device="cpu")
+    runner = RacingRunner(env, cfg, log_dir=None, device="cpu", sync=True)
     runner.start()
     losses = runner.iteration(0)
     assert env.steps == STEPS and math.isnan(losses["value"])
@@ -92,7 +167,7 @@ def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> 
     env = _ThreadsSeen()
     monkeypatch.setattr("agents.runner.thread_counts", lambda threads, workers: (1, 2))
     updates: list[int] = []
-    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None)
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None, sync=True)
     real_update = runner.alg.update
     monkeypatch.setattr(
         runner.alg, "update", lambda: updates.append(torch.get_num_threads()) or real_update()
@@ -102,3 +177,21 @@ def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> 
     finally:
         torch.set_num_threads(before)
     assert env.threads == {1} and updates == [2, 2]
+
+
+def test_overlapped_collection_and_update_share_the_cores_the_workers_leave(monkeypatch):
+    before = torch.get_num_threads()
+    env = _ThreadsSeen()
+    env.num_workers = 2
+    monkeypatch.setattr("agents.runner.os.sched_getaffinity", lambda pid: set(range(6)))
+    updates: list[int] = []
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None)
+    real_update = runner.alg.update
+    monkeypatch.setattr(
+        runner.alg, "update", lambda: updates.append(torch.get_num_threads()) or real_update()
+    )
+    try:
+        runner.learn(2)
+    finally:
+        torch.set_num_threads(before)
+    assert runner.threads == (4, 4) and env.threads == {4} and updates == [4, 4]

@@ -13,7 +13,14 @@ from agents.action_spaces import parse_action_space_spec
 from agents.cli import app, train
 from agents.hyperparameters import Hyperparameters
 from agents.options import PYTHON_ONLY, option_names, settings_from_options
-from agents.settings import RESUME_OVERRIDES, TrainSettings, load_settings, save_settings
+from agents.settings import (
+    RESUME_OVERRIDES,
+    TrainSettings,
+    grows_batch,
+    load_settings,
+    overlapped,
+    save_settings,
+)
 
 SPACE = parse_action_space_spec("3x3@1.0")
 NOT_SETTINGS = {"out", "recipe", "list_recipes", "clone", "resume", "hyperparameters"}
@@ -91,3 +98,25 @@ def test_new_runs_store_their_preset_by_name(tmp_path):
 def test_unknown_fields_are_refused():
     with pytest.raises(ValidationError, match="no_such_field"):
         TrainSettings(action_space=SPACE, no_such_field=1)
+
+
+@pytest.mark.parametrize(("grow_batch", "device", "steps_per_env", "grows"), [
+    (None, "cuda", None, True),  # auto: a GPU grows the iteration with the races
+    (None, "cuda:1", None, True),
+    (None, "cpu", None, False),
+    (None, "cuda", 256, False),  # a fixed rollout length is kept as given
+    (True, "cpu", None, True),
+    (False, "cuda", None, False),
+])  # fmt: skip
+def test_the_batch_grows_on_a_gpu_unless_told(grow_batch, device, steps_per_env, grows):
+    assert grows_batch(grow_batch, device, steps_per_env) is grows
+
+
+@pytest.mark.parametrize(("sync", "device", "overlaps"), [
+    (None, "cuda", True),  # auto: the update runs on the GPU while the cores collect
+    (None, "cpu", False),  # auto: on CPU cores the two halves compete for the same cores
+    (False, "cpu", True),
+    (True, "cuda", False),
+])  # fmt: skip
+def test_collection_and_update_overlap_on_a_gpu_unless_told(sync, device, overlaps):
+    assert overlapped(sync, device) is overlaps
