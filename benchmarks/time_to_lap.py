@@ -9,6 +9,9 @@ wall-clock minutes to the first evaluation (race mode, 3 laps, deterministic pol
 physical-limit lap (``tracks.raceline``) and the pure-pursuit baseline driving the same
 action space.
 
+``--mode sync,overlapped`` trains each case both ways (collect then update, train's
+default on a CPU, or the update during the next rollout).
+
 Run: ``.venv/bin/python benchmarks/time_to_lap.py --case camera+lidar --max-minutes 15``
 """
 
@@ -50,9 +53,19 @@ def references() -> tuple[float, float | None]:
     return limit, result.car("car0").best_lap
 
 
-def train_case(case: str, max_minutes: float, out: Path, workers: int, critic: CriticInput) -> dict:
+def train_case(
+    case: str,
+    max_minutes: float,
+    out: Path,
+    workers: int,
+    critic: CriticInput,
+    mode: str,
+    seed: int = 0,
+) -> dict:
     """Train one sensor case until a clean 3-lap evaluation or the time cap."""
     given = {
+        "sync": mode == "sync",
+        "seed": seed,
         "sensors": case.replace("+", ","),
         "minutes": max_minutes,
         "workers": workers,
@@ -61,7 +74,7 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int, critic: C
     }
     settings = RECIPE.settings(given, stop_on_clean_eval=True)
     started = time.monotonic()
-    run_dir = out / case.replace("+", "_")
+    run_dir = out / f"{case.replace('+', '_')}_{mode}_seed{seed}"
     result = Trainer(settings, run_dir, RECIPE.hyperparameters_model()).run()
     evaluations = {s.elapsed_s: s.eval for s in result.evaluations if s.eval is not None}
     best = max(evaluations.values(), key=lambda e: e.progress, default=None)
@@ -69,7 +82,7 @@ def train_case(case: str, max_minutes: float, out: Path, workers: int, critic: C
     return {
         "clean_best_lap": clean.best_lap if clean else None,
         "clean_total": clean.total_time if clean else None,
-        "case": case,
+        "case": f"{case} ({mode}, seed {seed})",
         "minutes": result.first_clean_eval_s / 60.0 if result.first_clean_eval_s else None,
         "wall_minutes": (time.monotonic() - started) / 60.0,
         "iterations": result.iterations,
@@ -89,6 +102,10 @@ def main() -> None:
     )
     parser.add_argument("--max-minutes", type=float, default=15.0)
     parser.add_argument("--workers", type=int, default=0)
+    parser.add_argument(
+        "--mode", default="sync", help="comma-separated: sync,overlapped (default: train's)"
+    )
+    parser.add_argument("--seeds", default="0", help="comma-separated training seeds")
     parser.add_argument("--out", type=Path, default=Path("runs/time_to_lap"))
     parser.add_argument(
         "--critic",
@@ -100,7 +117,12 @@ def main() -> None:
     args = parser.parse_args()
     cases = args.case or list(DEFAULT_CASES)
     limit, pursuit = references()
-    rows = [train_case(c, args.max_minutes, args.out, args.workers, args.critic) for c in cases]
+    rows = [
+        train_case(c, args.max_minutes, args.out, args.workers, args.critic, mode, int(seed))
+        for c in cases
+        for mode in args.mode.split(",")
+        for seed in args.seeds.split(",")
+    ]
     columns = ("policy", "minutes to clean 3 laps", "iterations", "clean run: best lap / total")
     table = ResultTable(
         f"time to 3 clean laps on {TRACK} ({SPACE}, follow_center_line, {args.critic} critic)",

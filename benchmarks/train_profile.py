@@ -1,11 +1,14 @@
 """Training cost: where an iteration's time goes (collection vs PPO update).
 
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
-evaluations or run files) for each ``--device``, ``--workers`` and ``--critic`` value, with
-``--races`` parallel races and ``--threads`` torch threads (defaults: train's; the table
-shows the threads while collecting / updating), and prints one table: samples/s end to end,
-collection and update seconds per iteration, the update's share, the value loss of the
-last iteration. The first iteration is a warm-up and is not counted.
+evaluations or run files) for each ``--device``, ``--workers``, ``--mode`` (sync: collect
+then update; overlapped: the update runs during the next collection) and ``--critic``
+value, with ``--races`` parallel races and ``--threads`` torch threads (defaults: train's;
+the table shows the threads while collecting / updating), and prints one table: samples/s
+end to end, collection and update seconds per iteration, the share of the wall time the
+env workers and the learner's update each waited, how far the policy that starts an update
+is from the one that collected its rollout (mean ``|ratio - 1|``, 0 when synchronous), the
+value loss of the last iteration. The first iteration is a warm-up and is not counted.
 ``--profile`` writes a cProfile of one update (the last) to stdout, top functions by own
 time.
 
@@ -16,6 +19,7 @@ Run::
         --hyperparameters hp.json --workers 0,2 --profile
     .venv/bin/python benchmarks/train_profile.py --sensors camera --critic sensors,privileged
     .venv/bin/python benchmarks/train_profile.py --sensors lidar --device cpu,cuda
+    .venv/bin/python benchmarks/train_profile.py --workers 0,1,2 --mode sync,overlapped
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from agents.action_spaces import parse_action_space_spec
 from agents.hyperparameters import Hyperparameters
 from agents.privileged import CriticInput
 from agents.runner import RacingRunner
-from agents.settings import TrainSettings
+from agents.settings import TrainSettings, grows_batch, overlapped
 from agents.vecenv import RacingVecEnv
 
 
@@ -46,6 +50,7 @@ def measure(
     workers: int,
     critic: CriticInput,
     hp: Hyperparameters,
+    mode: str,
 ) -> dict[str, float]:
     """Train ``args.iterations`` (+1 warm-up) iterations; mean timings and the last losses."""
     sensors = tuple(args.sensors.split(","))
@@ -61,11 +66,21 @@ def measure(
     )
     try:
         actor_cfg, critic_cfg, groups = networks.model_configs(preset, sensors, space, critic)
-        cfg = hp.to_rsl_rl(env.num_envs, actor_cfg, critic_cfg, groups, args.steps_per_env)
+        asked = {"on": True, "off": False}.get(args.grow)
+        if args.hyperparameters and asked is None:
+            asked = False  # an explicit file is honoured as written, as by train
+        grow = grows_batch(asked, device, args.steps_per_env)
+        cfg = hp.to_rsl_rl(
+            env.num_envs, actor_cfg, critic_cfg, groups, args.steps_per_env, grow=grow
+        )
         torch.manual_seed(0)
-        runner = RacingRunner(env, cfg, log_dir=None, device=device, threads=args.threads)
+        if mode == "auto":
+            mode = "overlapped" if overlapped(None, device) else "sync"
+        runner = RacingRunner(
+            env, cfg, log_dir=None, device=device, threads=args.threads, sync=mode == "sync"
+        )
         runner.start()
-        collect = update = 0.0
+        wall = collect = update = staleness = 0.0
         losses: dict[str, float] = {}
         profiler = cProfile.Profile() if args.profile else None
         for it in range(args.iterations + 1):
@@ -74,8 +89,10 @@ def measure(
                 profiler.enable()
             losses = runner.iteration(it)
             if it > 0:
-                collect += runner.timings[0]
-                update += runner.timings[1]
+                wall += runner.timings.wall
+                collect += runner.timings.collect
+                update += runner.timings.update
+                staleness += runner.staleness
         if profiler is not None:
             profiler.disable()
             out = io.StringIO()
@@ -88,15 +105,19 @@ def measure(
         return {
             "device": device,
             "workers": workers,
+            "mode": mode,
             "threads": "/".join(map(str, runner.threads)),
             "races": env.num_races,
             "preset": preset,
             "critic": critic,
             "samples": samples,
             "minibatches": algorithm["num_mini_batches"] * algorithm["num_learning_epochs"],
-            "samples_per_s": samples * n / (collect + update),
+            "samples_per_s": samples * n / wall,
             "collect_s": collect / n,
             "update_s": update / n,
+            "collect_wait": max(0.0, wall - collect) / wall,
+            "update_wait": max(0.0, wall - update) / wall,
+            "staleness": staleness / n,
             "value_loss": losses["value"],
         }
     finally:
@@ -116,6 +137,17 @@ def main() -> None:
     parser.add_argument("--steps-per-env", type=int, default=None)
     parser.add_argument("--workers", default="0", help="comma-separated, e.g. 0,2")
     parser.add_argument("--device", default="cpu", help="comma-separated, e.g. cpu,cuda")
+    parser.add_argument(
+        "--mode",
+        default="auto",
+        help="comma-separated: sync,overlapped (default: train's, overlapped on a GPU only)",
+    )
+    parser.add_argument(
+        "--grow",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="grow the iteration and minibatch with the races (default: train's, auto)",
+    )
     parser.add_argument("--races", type=int, default=None, help="parallel races (default: train's)")
     parser.add_argument(
         "--critic",
@@ -130,23 +162,25 @@ def main() -> None:
     args = parser.parse_args()
     hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
     rows = [
-        measure(args, device, int(w), critic, hp or Hyperparameters())
+        measure(args, device, int(w), critic, hp or Hyperparameters(), mode)
         for device in args.device.split(",")
         for w in args.workers.split(",")
+        for mode in args.mode.split(",")
         for critic in args.critic.split(",")
     ]
     columns = (
-        "device", "workers", "threads", "races", "preset", "critic", "samples/it", "minibatches/it",
-        "samples/s", "collect s/it", "update s/it", "update share", "value loss",
+        "device", "workers", "mode", "threads", "races", "preset", "critic", "samples/it",
+        "minibatches/it", "samples/s", "collect s/it", "update s/it", "workers wait",
+        "update waits", "|ratio-1|", "value loss",
     )  # fmt: skip
     table = ResultTable(
-        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrrrllrrrrrrr"
+        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrlrrllrrrrrrrrr"
     )
     for r in rows:
-        total = r["collect_s"] + r["update_s"]
         table.add_row(
             str(r["device"]),
             str(r["workers"]),
+            str(r["mode"]),
             r["threads"],
             str(r["races"]),
             str(r["preset"]),
@@ -156,7 +190,9 @@ def main() -> None:
             f"{r['samples_per_s']:.0f}",
             f"{r['collect_s']:.2f}",
             f"{r['update_s']:.2f}",
-            f"{r['update_s'] / total:.0%}",
+            f"{r['collect_wait']:.0%}",
+            f"{r['update_wait']:.0%}",
+            f"{r['staleness']:.3f}",
             f"{r['value_loss']:.3g}",
         )
     table.notes.append(f"wall {time.monotonic() - started:.0f} s")
