@@ -74,16 +74,6 @@ class IterationTimings:
     collect: float = 0.0
     update: float = 0.0
 
-    @property
-    def collect_wait(self) -> float:
-        """Share of the wall time the env workers had nothing to collect."""
-        return max(0.0, self.wall - self.collect) / self.wall if self.wall else 0.0
-
-    @property
-    def update_wait(self) -> float:
-        """Share of the wall time no update ran."""
-        return max(0.0, self.wall - self.update) / self.wall if self.wall else 0.0
-
 
 class Behaviour:
     """The algorithm as the rollout collector sees it: rsl-rl's own ``act``,
@@ -163,7 +153,7 @@ class RacingRunner(OnPolicyRunner):
         self.logger.git_status_repos.clear()
         self._obs: TensorDict | None = None
         self.timings = IterationTimings()  # the last iteration's
-        self.staleness = 0.0  # the last update's mean |ratio - 1| at its start (overlapped)
+        self.staleness = 0.0  # the mean |w - 1| the last overlapped update corrected
         workers = getattr(env, "num_workers", 0)
         self.overlapped = not sync and hasattr(self.alg, "critic")  # imitation runs in order
         if self.overlapped:
