@@ -310,3 +310,5 @@ class RacingRunner(OnPolicyRunner):
                 action_std=self.alg.get_policy().output_std,
                 rnd_weight=None,
             )
+        if self.overlapped and getattr(self.logger, "writer", None) is not None:
+            self.logger.writer.add_scalar("Policy/behaviour_weight_spread", self.staleness, it)

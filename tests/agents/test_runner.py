@@ -8,6 +8,7 @@ import time
 
 import pytest
 import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from agents.runner import NonFiniteEnvError, RacingRunner, thread_counts
 from tests.agents.bandit import Bandit, ppo_config
@@ -35,6 +36,9 @@ def test_iterations_return_losses_and_log_only_tensorboard(tmp_path, capsys, syn
     files = {p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file()}
     assert files and all(name.startswith("events.out.tfevents.") for name in files), files
     assert capsys.readouterr().out == ""
+    tags = EventAccumulator(str(tmp_path)).Reload().Tags()["scalars"]
+    assert "Loss/value" in tags
+    assert ("Policy/behaviour_weight_spread" in tags) is not sync
 
 
 @MODES
@@ -162,12 +166,10 @@ def test_thread_counts_give_the_update_every_core_and_collection_what_workers_le
     assert thread_counts(threads, workers, cores) == expected
 
 
-def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> None:
+def _update_threads(runner: RacingRunner, monkeypatch) -> list[int]:
+    """Train two iterations; torch's thread count at the start of each update."""
     before = torch.get_num_threads()
-    env = _ThreadsSeen()
-    monkeypatch.setattr("agents.runner.thread_counts", lambda threads, workers: (1, 2))
     updates: list[int] = []
-    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None, sync=True)
     real_update = runner.alg.update
     monkeypatch.setattr(
         runner.alg, "update", lambda: updates.append(torch.get_num_threads()) or real_update()
@@ -176,22 +178,20 @@ def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> 
         runner.learn(2)
     finally:
         torch.set_num_threads(before)
-    assert env.threads == {1} and updates == [2, 2]
+    return updates
+
+
+def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> None:
+    env = _ThreadsSeen()
+    monkeypatch.setattr("agents.runner.thread_counts", lambda threads, workers: (1, 2))
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None, sync=True)
+    assert _update_threads(runner, monkeypatch) == [2, 2] and env.threads == {1}
 
 
 def test_overlapped_collection_and_update_share_the_cores_the_workers_leave(monkeypatch):
-    before = torch.get_num_threads()
     env = _ThreadsSeen()
     env.num_workers = 2
     monkeypatch.setattr("agents.runner.os.sched_getaffinity", lambda pid: set(range(6)))
-    updates: list[int] = []
     runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None)
-    real_update = runner.alg.update
-    monkeypatch.setattr(
-        runner.alg, "update", lambda: updates.append(torch.get_num_threads()) or real_update()
-    )
-    try:
-        runner.learn(2)
-    finally:
-        torch.set_num_threads(before)
-    assert runner.threads == (4, 4) and env.threads == {4} and updates == [4, 4]
+    assert _update_threads(runner, monkeypatch) == [4, 4]
+    assert runner.threads == (4, 4) and env.threads == {4}
