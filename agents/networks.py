@@ -21,6 +21,8 @@ preset             layers
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator, Sequence
 from typing import Any, get_args
 
 import numpy as np
@@ -95,6 +97,49 @@ class PooledCNNModel(CNNModel):
         result = super()._get_obs_dim(*args)
         self.obs_dims_2d = [(h // self.pool, w // self.pool) for h, w in self.obs_dims_2d]
         return result
+
+
+@contextlib.contextmanager
+def images_pooled_once(models: Sequence[nn.Module], observations: TensorDict) -> Iterator[None]:
+    """Within the block, ``observations`` (a rollout's) hold their images already pooled
+    and the :class:`PooledCNNModel` encoders of ``models`` skip their pooling.
+
+    An update reads each image once per epoch: pooling the rollout once instead gives the
+    same numbers (the same pooling of the same images), with less pooling and 1/pool^2 of
+    the image data gathered per minibatch. A group is pooled only when every model that
+    reads it pools it alike; both are restored on leaving, the images in place.
+    """
+    readers: dict[str, list[nn.Module]] = {}  # group -> the models reading it as an image
+    flat: set[str] = set()  # groups some model reads as a vector
+    for model in models:
+        flat.update(getattr(model, "obs_groups", []))
+        for group in getattr(model, "obs_groups_2d", []):
+            readers.setdefault(group, []).append(model)
+    pools = {
+        group: models_of[0].pool
+        for group, models_of in readers.items()
+        if group not in flat
+        and all(isinstance(m, PooledCNNModel) and m.pool > 1 for m in models_of)
+        and len({m.pool for m in models_of}) == 1
+    }
+    if not pools:
+        yield
+        return
+    full = {group: observations[group] for group in pools}
+    encoders = [(m, group, m.cnns[group]) for group in pools for m in readers[group]]
+    for group, pool in pools.items():
+        images = full[group].flatten(0, 1)
+        pooled = nn.functional.avg_pool2d(images, pool)
+        observations.set(group, pooled.view(*full[group].shape[:2], *pooled.shape[1:]))
+    for model, group, encoder in encoders:
+        model.cnns[group] = encoder[1]  # the CNN after the AvgPool2d
+    try:
+        yield
+    finally:
+        for model, group, encoder in encoders:
+            model.cnns[group] = encoder
+        for group, images in full.items():
+            observations.set(group, images)
 
 
 def deepracer_network_name(preset: str) -> str:

@@ -36,6 +36,8 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
+from agents.networks import images_pooled_once
+
 # Largest weight of a sample's advantage, pi_prox / mu, in an overlapped update: a bound
 # on the variance one rare action of the collecting policy can add.
 MAX_BEHAVIOUR_WEIGHT = 2.0
@@ -204,7 +206,7 @@ class RacingRunner(OnPolicyRunner):
         self._collect_rollout(it, self.alg)
         collected = time.monotonic()
         torch.set_num_threads(self.threads[1])
-        losses = self.alg.update()
+        losses = self._update()
         done = time.monotonic()
         self.timings = IterationTimings(done - started, collected - started, done - collected)
         return losses
@@ -241,11 +243,22 @@ class RacingRunner(OnPolicyRunner):
         started = time.monotonic()
         stream = torch.cuda.Stream() if self.device.startswith("cuda") else None
         with torch.cuda.stream(stream) if stream else contextlib.nullcontext():
-            self.staleness = self._rebase_on_proximal()
-            losses = self.alg.update()
+            losses = self._update(rebase=True)
         if stream is not None:
             stream.synchronize()
         return losses, time.monotonic() - started
+
+    def _update(self, rebase: bool = False) -> dict[str, float]:
+        """The algorithm's update, the rollout's images pooled once for it
+        (:func:`~agents.networks.images_pooled_once`); ``rebase``: corrected first for a
+        rollout one update behind (:attr:`staleness`)."""
+        models = [
+            getattr(self.alg, name) for name in ("actor", "critic") if hasattr(self.alg, name)
+        ]
+        with images_pooled_once(models, self.alg.storage.observations):
+            if rebase:
+                self.staleness = self._rebase_on_proximal()
+            return self.alg.update()
 
     def _rebase_on_proximal(self) -> float:
         """Decoupled PPO's correction for a rollout one update behind; the mean ``|w - 1|``.

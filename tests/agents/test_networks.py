@@ -8,6 +8,7 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 import torch
+from tensordict import TensorDict
 
 from agents import networks
 from agents.export import example_inputs, export_onnx
@@ -122,3 +123,34 @@ def test_pfsp_prefers_opponents_the_learner_loses_to():
     weights = pfsp_weights([0.9, 0.5, 0.1])
     assert weights.sum() == pytest.approx(1.0)
     assert weights[2] > weights[1] > weights[0] > 0
+
+
+def _camera_rollout(steps: int = 3, envs: int = 4) -> TensorDict:
+    torch.manual_seed(0)
+    camera = torch.rand(steps, envs, 1, 120, 160)
+    lidar = torch.rand(steps, envs, 64)
+    return TensorDict({"camera": camera, "lidar": lidar}, batch_size=[steps, envs])
+
+
+def test_an_update_may_read_the_images_pooled_once_with_the_same_results():
+    actor = networks.build_actor("CPU CNN", ("camera", "lidar"), DISCRETE)
+    rollout = _camera_rollout()
+    full = rollout["camera"]
+    with torch.no_grad():
+        expected = actor(rollout.flatten(0, 1))
+        with networks.images_pooled_once([actor], rollout):
+            assert rollout["camera"].shape == (3, 4, 1, 30, 40)
+            assert rollout["lidar"].shape == (3, 4, 64)  # not an image: as it was
+            pooled = actor(rollout.flatten(0, 1))
+    torch.testing.assert_close(pooled, expected)
+    assert rollout["camera"] is full  # the rollout and the network are as they were
+    assert isinstance(actor.cnns["camera"][0], torch.nn.AvgPool2d)
+
+
+def test_images_another_network_reads_unpooled_stay_unpooled():
+    pooled_cnn = networks.build_actor("CPU CNN", ("camera",), DISCRETE)
+    plain_cnn = networks.build_actor("3-layer CNN", ("camera",), DISCRETE)
+    rollout = _camera_rollout()
+    with networks.images_pooled_once([pooled_cnn, plain_cnn], rollout):
+        assert rollout["camera"].shape == (3, 4, 1, 120, 160)
+        assert isinstance(pooled_cnn.cnns["camera"][0], torch.nn.AvgPool2d)
