@@ -288,3 +288,74 @@ class Rating(Base):
     sigma: Mapped[float] = mapped_column(Float)
     races: Mapped[int] = mapped_column(Integer, default=0)
     updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
+
+
+TRAINING_STATUSES = ("queued", "running", "done", "failed", "stopped")
+TRAINING_EVENT_KINDS = ("iteration", "poses", "log", "status")
+
+
+class TrainingJob(Base):
+    """A racer's training run on the league's trainers (:mod:`league.training`).
+
+    ``spec`` holds what ``slipstream train`` takes, in its command-line forms (the reward
+    function's source apart, in ``reward_source``); ``minutes`` is the budget the monthly
+    quota reserves. A trainer leases the job as workers lease races, and while it runs
+    writes :class:`TrainingEvent` rows (iterations, log lines). ``compute_seconds`` is
+    the wall time it ran, which the monthly quota charges once it has ended; the run
+    folder is stored as a zip (``run_sha256``) and its model becomes ``model_id``.
+    """
+
+    __tablename__ = "training_jobs"
+    __table_args__ = (
+        CheckConstraint(_in("status", TRAINING_STATUSES), name="status"),
+        Index("ix_training_jobs_status_lease", "status", "lease_expires_at"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    owner_id: Mapped[int] = mapped_column(ForeignKey("racers.id", ondelete="CASCADE"), index=True)
+    name: Mapped[str] = mapped_column(String(64))
+    status: Mapped[str] = mapped_column(String(16), default="queued")
+    priority: Mapped[int] = mapped_column(Integer, default=0)
+    spec: Mapped[dict[str, Any]] = mapped_column(JSON)
+    reward_source: Mapped[str] = mapped_column(Text)
+    minutes: Mapped[float] = mapped_column(Float)
+    clone_of_id: Mapped[int | None] = mapped_column(
+        ForeignKey("training_jobs.id", ondelete="SET NULL"), nullable=True
+    )
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    max_attempts: Mapped[int] = mapped_column(Integer, default=2)
+    lease_owner: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    lease_expires_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
+    stop_requested_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    compute_seconds: Mapped[float] = mapped_column(Float, default=0.0)
+    best_lap_ms: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    run_sha256: Mapped[str | None] = mapped_column(String(64), nullable=True)
+    model_id: Mapped[int | None] = mapped_column(
+        ForeignKey("models.id", ondelete="SET NULL"), nullable=True
+    )
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)
+    started_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
+    finished_at: Mapped[datetime | None] = mapped_column(UTCDateTime, nullable=True)
+    updated_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow, onupdate=utcnow)
+
+    owner: Mapped[Racer] = relationship(lazy="joined")
+
+
+class TrainingEvent(Base):
+    """One thing a training job reported: an iteration's metrics (with its evaluation, if
+    any), the poses of one of its training races (the live top-down view), a log line,
+    or a change of status. Ids grow, so they order a job's events and
+    serve as the Server-Sent Events ids a viewer resumes from."""
+
+    __tablename__ = "training_events"
+    __table_args__ = (
+        CheckConstraint(_in("kind", TRAINING_EVENT_KINDS), name="kind"),
+        Index("ix_training_events_job_id_id", "job_id", "id"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    job_id: Mapped[int] = mapped_column(ForeignKey("training_jobs.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(16))
+    data: Mapped[dict[str, Any]] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime, default=utcnow)

@@ -131,6 +131,54 @@ class Settings(BaseSettings):
         "request beyond it gets 503. Keep the open-files limit (LimitNOFILE) well above it.",
     )
 
+    # Training jobs (league.training): quotas and the sandbox, see docs/deploy.md ("Training").
+    training_jobs_total: int = Field(
+        default=1, ge=1, description="Training jobs running at once on the league; more wait."
+    )
+    training_jobs_per_racer: int = Field(
+        default=1, ge=1, description="Training jobs of one racer running at once; more wait."
+    )
+    training_queued_per_racer: int = Field(
+        default=3,
+        ge=1,
+        description="Training jobs one racer may have queued or running; more are refused (429).",
+    )
+    training_max_minutes: float = Field(
+        default=60.0, gt=0.0, description="Longest budget one training job may ask for."
+    )
+    training_minutes_per_month: float = Field(
+        default=600.0,
+        ge=0.0,
+        description="Training minutes one racer may use per calendar month (UTC); a job "
+        "whose budget would pass what is left is refused (429) until the month resets.",
+    )
+    training_workers: int | None = Field(
+        default=None,
+        ge=0,
+        description="Env worker processes of one training job; default: the host's cores "
+        "shared among training_jobs_total jobs.",
+    )
+    training_memory_mb: int = Field(
+        default=4096, gt=0, description="Address space of each process of a training job."
+    )
+    training_processes: int = Field(
+        default=512, gt=0, description="Processes and threads a training job may run at once."
+    )
+    training_file_mb: int = Field(
+        default=1024, gt=0, description="Largest file a training job may write."
+    )
+    training_disk_mb: int = Field(
+        default=4096,
+        gt=0,
+        description="Disk a training job's folder may take; past it the job is stopped.",
+    )
+    training_unconfined: bool = Field(
+        default=False,
+        description="Run training jobs without the bubblewrap sandbox on a host that cannot "
+        "provide it. Racers' reward functions then run with the trainer's rights: only for "
+        "a league whose racers are all trusted (docs/deploy.md).",
+    )
+
     @property
     def db_url(self) -> str:
         """The database URL in use (the embedded SQLite file unless one was given)."""

@@ -15,7 +15,18 @@ from league.models import Base
 from league.settings import Settings
 from tests.league.conftest import Database, ServerThread, free_port
 
-ALL_TABLES = {"racers", "models", "events", "entries", "jobs", "races", "race_cars", "ratings"}
+ALL_TABLES = {
+    "racers",
+    "models",
+    "events",
+    "entries",
+    "jobs",
+    "races",
+    "race_cars",
+    "ratings",
+    "training_jobs",
+    "training_events",
+}
 
 
 def _tables(engine) -> set[str]:
