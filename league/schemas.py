@@ -289,3 +289,77 @@ class RaceOut(RaceBrief):
 
     config: dict[str, Any]
     summary: dict[str, Any]
+
+
+# ------------------------------------------------------------------ training jobs
+OptionValue = str | int | float | bool | None
+
+
+class TrainingJobCreate(BaseModel):
+    """A training job: what ``slipstream train`` takes, the reward function as source."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: ModelName = Field(description="The model's name once trained.")
+    reward_source: str = Field(
+        min_length=1,
+        max_length=64 * 1024,
+        description="The reward function's Python source (DeepRacer's reward_function(params)).",
+    )
+    options: dict[str, OptionValue] = Field(
+        default_factory=dict,
+        max_length=32,
+        description="`slipstream train` options in their command-line forms, e.g. "
+        '{"track": "slipstream_speedway", "sensors": "camera", "action_space": "default"}.',
+    )
+    recipe: str | None = Field(default=None, max_length=64, description="A training recipe.")
+    hyperparameters: dict[str, OptionValue] | None = Field(
+        default=None, max_length=32, description="DeepRacer hyperparameters (hyperparameters.json)."
+    )
+    minutes: float = Field(gt=0, le=24 * 60, description="Training budget in minutes.")
+    clone_of: int | None = Field(
+        default=None, ge=1, le=MAX_ID, description="Start from the run of one of your jobs."
+    )
+
+
+class TrainingJobUpdate(BaseModel):
+    """What an admin may change on a training job."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    priority: int = Field(ge=-1000, le=1000, description="Higher runs first.")
+
+
+class TrainingJobOut(_Out):
+    """A training job: its request, where it stands and what it made."""
+
+    id: int
+    owner: str
+    name: str
+    status: str
+    priority: int
+    options: dict[str, Any]
+    recipe: str | None
+    hyperparameters: dict[str, Any] | None
+    minutes: float
+    clone_of: int | None
+    attempts: int
+    error: str | None
+    stop_requested: bool
+    compute_minutes: float
+    best_lap_ms: int | None
+    model_id: int | None
+    has_run: bool
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+
+
+class TrainingQuota(BaseModel):
+    """A racer's training quotas and what they used this month."""
+
+    max_minutes_per_job: float
+    jobs_queued_or_running: int
+    minutes_per_month: float
+    minutes_used: float
+    resets_at: datetime

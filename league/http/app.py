@@ -17,8 +17,9 @@ from league.db import make_engine, make_session_factory
 from league.http.bodylimit import BodyLimitMiddleware, BodyRule
 from league.http.ratelimit import RateLimitMiddleware
 from league.http.read_cache import ReadCache
-from league.http.routes import events, health, jobs, models, racers, races, tracks
+from league.http.routes import events, health, jobs, models, racers, races, tracks, training
 from league.http.security import SecurityHeadersMiddleware
+from league.http.training_feed import TrainingFeed
 from league.http.upload_validation import UploadValidator
 from league.settings import Settings
 from league.store import open_storage
@@ -31,6 +32,7 @@ from league.web import routes as web_routes
 
 log = logging.getLogger("league")
 MULTIPART_OVERHEAD = 64 * 1024
+TRAINING_JOB_BODY_BYTES = 160 * 1024  # a 64 KiB reward source, JSON-escaped, and options
 
 
 def _describe(exc: RequestValidationError) -> str:
@@ -87,7 +89,12 @@ def _install_middleware(app: FastAPI, settings: Settings) -> None:
     app.add_middleware(
         BodyLimitMiddleware,
         default=BodyRule(settings.max_body_bytes, settings.body_timeout_seconds),
-        routes={("POST", app.url_path_for("upload_model")): upload},
+        routes={
+            ("POST", app.url_path_for("upload_model")): upload,
+            ("POST", app.url_path_for("create_training_job")): BodyRule(
+                TRAINING_JOB_BODY_BYTES, settings.body_timeout_seconds
+            ),
+        },
     )
     app.add_middleware(
         RateLimitMiddleware, rate=settings.rate_limit_per_second, burst=settings.rate_limit_burst
@@ -126,7 +133,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.read_cache = ReadCache()  # public reads, per results version
     app.state.list_builds = asyncio.Semaphore(1)  # uncached race lists: one at a time
     app.state.upload_validator = UploadValidator(settings)
-    for module in (health, racers, models, events, jobs, races, tracks, web_model_data):
+    # reward checks of new training jobs: sandboxed children, a few at once
+    app.state.training_checks = asyncio.Semaphore(settings.validation_concurrency)
+    app.state.training_feed = TrainingFeed(app.state.session_factory)  # live events
+    for module in (health, racers, models, events, jobs, races, tracks, training, web_model_data):
         app.include_router(module.router)
     app.include_router(web_routes.router)
     app.include_router(web_docs.router)

@@ -18,7 +18,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 
 SHA256 = re.compile(r"^[0-9a-f]{64}$")
-KINDS = {"models": ".zip", "traces": ".json"}
+KINDS = {"models": ".zip", "traces": ".json", "runs": ".zip"}
 TEMP_PREFIX = ".tmp-"
 FULL_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 PROBE_BYTES = 4096

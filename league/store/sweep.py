@@ -24,11 +24,15 @@ from typing import TypeVar
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from league.models import Model, Race
+from league.models import Model, Race, TrainingJob
 from league.store.base import FileStore
 
 log = logging.getLogger("slipstream.sweep")
-REFERENCES = {"models": Model.sha256, "traces": Race.trace_sha256}
+REFERENCES = {
+    "models": Model.sha256,
+    "traces": Race.trace_sha256,
+    "runs": TrainingJob.run_sha256,
+}
 """Which column refers to the stored files of each kind."""
 BATCH = 500
 T = TypeVar("T")

@@ -14,7 +14,7 @@ import pytest
 from league import crud
 from league.db import make_engine, make_session_factory
 from league.migrations import upgrade
-from league.models import Event
+from league.models import Event, TrainingJob
 from league.schemas import EventCreate
 from league.settings import Settings
 from league.store.local import LocalFileStore
@@ -41,8 +41,9 @@ def _orphan(storage: LocalFileStore, kind: str, content: bytes) -> Path:
     return path
 
 
-def _referenced(database: Database, data_dir: Path) -> tuple[Path, Path]:
-    """A model file with its row and a trace file with its race, before the server runs."""
+def _referenced(database: Database, data_dir: Path) -> tuple[Path, Path, Path]:
+    """A model file with its row, a trace file with its race and a training run's zip with
+    its job, before the server runs."""
     settings = Settings(data_dir=data_dir, database_url=database.url)
     engine = make_engine(settings.db_url)
     upgrade(engine)
@@ -54,7 +55,19 @@ def _referenced(database: Database, data_dir: Path) -> tuple[Path, Path]:
         event = crud.create_event(session, EventCreate(name="Sweep Cup"), None)
         event = session.get_one(Event, event.id)
         race = crud.record_race(session, storage, event, race_result(event, [car("bot0")]), {})
-        paths = storage.path("models", model.sha256), storage.path("traces", race.trace_sha256)
+        run_sha, _ = storage.put("runs", b"a run folder's zip")
+        session.add(
+            TrainingJob(
+                owner_id=owner.id, name="kept", spec={}, reward_source="", minutes=1,
+                status="done", run_sha256=run_sha,
+            )
+        )  # fmt: skip
+        session.commit()
+        paths = (
+            storage.path("models", model.sha256),
+            storage.path("traces", race.trace_sha256),
+            storage.path("runs", run_sha),
+        )
     engine.dispose()
     return paths
 
@@ -74,7 +87,7 @@ def swept(
     """A store seeded with leftovers of every kind, then a server started on it."""
     data_dir = tmp_path_factory.mktemp("league") / "data"
     storage = LocalFileStore(data_dir / "files")
-    model_file, trace_file = _referenced(database, data_dir)
+    model_file, trace_file, run_file = _referenced(database, data_dir)
     files = {
         "stale temp": _age(_temp(model_file.parent, ".tmp-k1ll3d"), HOUR),
         "fresh temp": _temp(trace_file.parent, ".tmp-writing"),
@@ -82,7 +95,9 @@ def swept(
         "stale model orphan": _age(_orphan(storage, "models", b"no row"), HOUR),
         "fresh model orphan": _orphan(storage, "models", b"row being written"),
         "stale trace orphan": _age(_orphan(storage, "traces", b"no race"), HOUR),
+        "stale run orphan": _age(_orphan(storage, "runs", b"no training job"), HOUR),
         "referenced model": _age(model_file, HOUR),
+        "referenced run": _age(run_file, HOUR),
         "referenced trace": _age(trace_file, HOUR),
         "stray name": _age(_temp(model_file.parent, "README"), HOUR),
     }
@@ -94,6 +109,7 @@ def test_start_up_removes_only_stale_leftovers(swept: tuple[League, dict[str, Pa
     _, files = swept
     left = {name for name, path in files.items() if path.exists()}
     gone = {"stale temp", "stale probe", "stale model orphan", "stale trace orphan"}
+    gone |= {"stale run orphan"}
     assert left == set(files) - gone
 
 
@@ -121,8 +137,9 @@ def test_a_database_that_refers_to_no_files_sweeps_none(tmp_path: Path) -> None:
     engine = make_engine(f"sqlite:///{tmp_path / 'empty.db'}")  # the wrong, empty database
     upgrade(engine)
     storage = LocalFileStore(tmp_path / "files")
-    files = [_age(_orphan(storage, kind, b"a file"), HOUR) for kind in ("models", "traces")]
+    kinds = ("models", "traces", "runs")
+    files = [_age(_orphan(storage, kind, b"a file"), HOUR) for kind in kinds]
     report = sweep(make_session_factory(engine), storage, grace_s=600)
     engine.dispose()
     assert all(path.exists() for path in files)
-    assert report.unreferenced == {"models": 0, "traces": 0}
+    assert report.unreferenced == dict.fromkeys(kinds, 0)

@@ -1,0 +1,187 @@
+"""A training job as the league's trainers run it: its spec, and the confined child that runs it.
+
+A job is what ``slipstream train`` takes, minus what the server decides: ``options`` in
+their command-line forms (only :data:`JOB_OPTIONS`), a recipe, DeepRacer hyperparameters,
+a budget in minutes and the reward function's source. :func:`job_settings` turns a spec
+into :class:`~agents.settings.TrainSettings` the same way in the API process (which checks
+the spec without running any of the racer's code) and in the child.
+
+The child, ``python -m agents.train_job WORKDIR [--check]``, runs inside the trainer's
+sandbox (``league.training.sandbox``). ``WORKDIR`` holds ``job.json`` (the spec plus the
+trainer's ``workers``), ``reward.py`` and, for a clone, the parent run in ``parent/``. With
+``--check`` it loads and pre-checks the reward function and prints one JSON line,
+``{"ok": true}`` or ``{"error": message}``; otherwise it trains into ``WORKDIR/run`` and
+prints one JSON line per iteration (``{"type": "iteration", ...}``) and a last one
+(``{"type": "done", ...}``); anything else it prints is a log line. A ``STOP`` file in
+``WORKDIR`` (or SIGTERM) stops it as Ctrl-C stops ``slipstream train``: finished work is
+kept and packed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from agents.options import settings_from_options
+from agents.recipes import get_recipe
+from agents.settings import TrainSettings
+from tracks.catalog import builtin_names
+
+JOB_OPTIONS = (
+    "track",
+    "direction",
+    "race_type",
+    "sensors",
+    "action_space",
+    "network",
+    "critic",
+    "teacher",
+    "seed",
+    "eval_every",
+    "eval_time_limit",
+    "selfplay",
+)
+"""The ``train`` options a job may set; the trainer decides workers, threads and device,
+the reward is the job's source, and files on the server are never named."""
+JOB_FILE, REWARD_FILE, RUN_DIR, PARENT_DIR = "job.json", "reward.py", "run", "parent"
+STOP_FILE = "STOP"
+"""Created by the trainer to stop the job (signals do not cross the sandbox's init)."""
+MAX_REWARD_SOURCE = 64 * 1024
+
+
+def check_options(options: Mapping[str, Any]) -> None:
+    """Refuse options a job may not set, tracks that are not built in, and action spaces
+    given as file paths: a job never names a file on the server."""
+    unknown = sorted(set(options) - set(JOB_OPTIONS))
+    if unknown:
+        raise ValueError(
+            f"a training job cannot set {', '.join(unknown)}; it may set {', '.join(JOB_OPTIONS)}"
+        )
+    track = options.get("track")
+    if track is not None and track not in builtin_names():
+        raise ValueError(
+            f"track {track!r}: a training job races a built-in track, one of "
+            f"{', '.join(builtin_names())}"
+        )
+    space = str(options.get("action_space") or "default")
+    if "/" in space.split(":", 1)[0] or space.endswith(".json"):
+        raise ValueError(
+            f"action_space {space!r}: give a spec (default, console:..., continuous:..., "
+            "list:...), not a file"
+        )
+
+
+def job_settings(
+    options: Mapping[str, Any],
+    recipe: str | None,
+    reward_path: Path,
+    minutes: float,
+    workers: int | None = None,
+    opponent: Path | None = None,
+    explicit_hyperparameters: bool = False,
+) -> TrainSettings:
+    """The settings a job trains with: its ``options`` over its recipe's over the defaults,
+    with the job's reward file, budget and (a clone of a parent run) opponent. Explicit
+    hyperparameters are honoured as written, as by ``slipstream train``."""
+    check_options(options)
+    given: dict[str, Any] = {**options, "reward_fn": str(reward_path), "minutes": minutes}
+    if explicit_hyperparameters:
+        given["grow_batch"] = False
+    if workers is not None:
+        given["workers"] = workers
+    if opponent is not None:
+        given["opponent"] = [opponent]
+    if recipe is None:
+        return settings_from_options(given)
+    return get_recipe(recipe).settings(given)
+
+
+def _emit(record: dict[str, Any]) -> None:
+    print(json.dumps(record, separators=(",", ":"), default=str), flush=True)
+
+
+def _check(workdir: Path, job: dict[str, Any]) -> int:
+    from agents.rewards import RewardFunctionError, load_reward_function
+
+    try:
+        settings = job_settings(job["options"], job.get("recipe"), workdir / REWARD_FILE, 1.0)
+        load_reward_function(settings.reward_fn, settings.race_type)
+    except (RewardFunctionError, ValueError) as exc:
+        _emit({"error": str(exc).replace(f"{workdir}/", "")})
+        return 0
+    _emit({"ok": True})
+    return 0
+
+
+def _train(workdir: Path, job: dict[str, Any]) -> int:
+    from agents.hyperparameters import Hyperparameters
+    from agents.recipes import parent_model
+    from agents.train import Trainer
+
+    parent = workdir / PARENT_DIR
+    clone = parent if parent.is_dir() else None
+    recipe = get_recipe(job["recipe"]) if job.get("recipe") else None
+    opponent = parent_model(parent) if recipe and recipe.parent and clone else None
+    settings = job_settings(
+        job["options"],
+        job.get("recipe"),
+        workdir / REWARD_FILE,
+        job["minutes"],
+        workers=job.get("workers"),
+        opponent=opponent,
+        explicit_hyperparameters=job.get("hyperparameters") is not None,
+    )
+    if job.get("hyperparameters") is not None:
+        hp = Hyperparameters(**job["hyperparameters"])
+    else:
+        hp = recipe.hyperparameters_model() if recipe else None
+    trainer = Trainer(settings, workdir / RUN_DIR, hp, clone=clone)
+    _stop_when_asked(workdir / STOP_FILE)
+
+    def on_iteration(stats: Any) -> None:
+        record = asdict(stats)
+        _emit({"type": "iteration", **record})
+
+    result = trainer.run(on_iteration)
+    _emit(
+        {
+            "type": "done",
+            "iterations": result.iterations,
+            "elapsed_s": result.elapsed_s,
+            "interrupted": result.interrupted,
+            "best_lap": result.best_lap,
+            "model": result.model_zip is not None,
+        }
+    )
+    return 0
+
+
+def _stop_when_asked(stop_file: Path) -> None:
+    """Once ``stop_file`` exists, SIGTERM this process (the trainer's graceful stop)."""
+
+    def watch() -> None:
+        while not stop_file.exists():
+            time.sleep(0.5)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, daemon=True, name="stop-file").start()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the confined child (see the module docstring)."""
+    args = sys.argv[1:] if argv is None else argv
+    workdir = Path(args[0])
+    job = json.loads((workdir / JOB_FILE).read_text())
+    return _check(workdir, job) if "--check" in args else _train(workdir, job)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
