@@ -1,0 +1,168 @@
+"""Real trainer processes against a real server: a one-minute job ends with a model that
+races; a trainer killed with SIGKILL leaves nothing running and another trainer finishes
+its job; a reward that reaches for the network mid-training fails its job with the reason."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from arena import make_config
+from arena.race import run_race
+from league.models import Model, TrainingJob
+from league.training.sandbox import probe
+from submissions import load_policy
+from tests.league.conftest import Database, League, start_league
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(
+        probe() is not None and os.environ.get("CI") != "true",
+        reason=f"this host cannot sandbox training jobs: {probe()} (CI installs bubblewrap)",
+    ),
+]
+LEASE_SECONDS = 4.0
+JOB = {
+    "name": "trained-on-the-server",
+    "reward_source": (
+        "def reward_function(params):\n"
+        "    return 1.0 - 2.0 * params['distance_from_center'] / params['track_width']\n"
+    ),
+    "recipe": "time_trial",
+    "options": {"track": "slipstream_speedway"},
+    "minutes": 0.75,
+}
+
+
+@pytest.fixture(scope="module", params=["sqlite"])
+def database(request: pytest.FixtureRequest, tmp_path_factory) -> Iterator[Database]:
+    """SQLite only: the PostgreSQL queue is covered by test_training_queue."""
+    folder = tmp_path_factory.mktemp("sqlite")
+    yield Database(f"sqlite:///{folder / 'league.db'}", "sqlite")
+
+
+@pytest.fixture(scope="module")
+def league(database: Database, tmp_path_factory: pytest.TempPathFactory) -> Iterator[League]:
+    yield from start_league(
+        database,
+        tmp_path_factory.mktemp("league") / "data",
+        lease_seconds=LEASE_SECONDS,
+        training_workers=1,
+    )
+
+
+def _trainer(league: League, name: str, log: Path) -> subprocess.Popen:
+    env = {
+        **os.environ,
+        "SLIPSTREAM_DATA_DIR": str(league.settings.data_dir),
+        "SLIPSTREAM_DATABASE_URL": league.settings.db_url,
+        "SLIPSTREAM_LEASE_SECONDS": str(LEASE_SECONDS),
+        "SLIPSTREAM_POLL_SECONDS": "0.2",
+        "SLIPSTREAM_TRAINING_WORKERS": "1",
+    }
+    return subprocess.Popen(
+        [sys.executable, "-m", "league.training.trainer", name],
+        env=env,
+        stdout=log.open("wb"),
+        stderr=subprocess.STDOUT,
+    )
+
+
+def _wait_for(league: League, job_id: int, done, timeout: float) -> TrainingJob:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with league.sessions() as session:
+            job = session.get_one(TrainingJob, job_id)
+            if done(job):
+                session.expunge(job)
+                return job
+        time.sleep(0.5)
+    raise AssertionError(f"training job {job_id} never got there")
+
+
+def _job_processes(marker: str) -> list[str]:
+    found = subprocess.run(["pgrep", "-af", marker], capture_output=True, text=True)
+    return [line for line in found.stdout.splitlines() if "pgrep" not in line]
+
+
+def test_a_killed_trainers_job_is_finished_by_another_and_its_model_races(
+    league: League, tmp_path: Path
+) -> None:
+    with league.client("alice") as alice:
+        created = alice.post("/api/training-jobs", json=JOB)
+        assert created.status_code == 201, created.text
+        job_id = created.json()["id"]
+        first = _trainer(league, "first", tmp_path / "first.log")
+        try:
+            _wait_for(league, job_id, lambda j: j.status == "running", 60)
+            time.sleep(8)  # the child is training
+            assert _job_processes(f"training/jobs/{job_id}-1")
+            first.send_signal(signal.SIGKILL)
+            first.wait()
+            time.sleep(1)
+            assert _job_processes(f"training/jobs/{job_id}-1") == []  # died with its trainer
+        finally:
+            first.kill()
+        second = _trainer(league, "second", tmp_path / "second.log")
+        try:
+            job = _wait_for(league, job_id, lambda j: j.status not in ("queued", "running"), 240)
+        finally:
+            second.send_signal(signal.SIGTERM)
+            second.wait(30)
+        log = (tmp_path / "second.log").read_text()
+        assert job.status == "done", f"{job.error}\n{log[-3000:]}"
+        assert job.attempts == 2 and job.model_id is not None and job.run_sha256
+        metrics = alice.get(f"/api/training-jobs/{job_id}/metrics").json()
+        assert metrics and metrics[-1]["iteration"] >= 1
+        logs = alice.get(f"/api/training-jobs/{job_id}/logs").text
+        assert "[running]" in logs and "lease expired" in logs
+        run = alice.get(f"/api/training-jobs/{job_id}/run.zip")
+        assert run.status_code == 200 and run.content[:2] == b"PK"
+    with league.sessions() as session:
+        model = session.get_one(Model, job.model_id)
+        assert model.name == JOB["name"] and model.owner_id == league.ids["alice"]
+        data = league.storage.read("models", model.sha256)
+    archive = tmp_path / "model.zip"
+    archive.write_bytes(data)
+    policy = load_policy(archive)
+    config = make_config(
+        track="slipstream_speedway",
+        sensors=policy.info.sensors,
+        action_space=policy.info.action_space,
+    )
+    config = config.model_copy(update={"laps": 1, "time_limit_s": 10.0})
+    raced = run_race(config, {"car0": policy})
+    assert raced.car("car0").distance > 5.0  # it drives
+
+
+def test_a_reward_that_reaches_out_mid_training_fails_its_job(
+    league: League, tmp_path: Path
+) -> None:
+    reward = (
+        "import socket\n"
+        "def reward_function(params):\n"
+        "    if params['steps'] > 30:\n"
+        "        socket.create_connection(('127.0.0.1', 5432), timeout=2)\n"
+        "    return 1.0\n"
+    )
+    body = {**JOB, "reward_source": reward, "recipe": None, "options": {"sensors": "lidar"}}
+    body["options"] = {"track": "slipstream_speedway", "sensors": "camera"}
+    with league.client("bob") as bob:
+        created = bob.post("/api/training-jobs", json=body)
+        assert created.status_code == 201, created.text
+        job_id = created.json()["id"]
+        trainer = _trainer(league, "third", tmp_path / "third.log")
+        try:
+            job = _wait_for(league, job_id, lambda j: j.status not in ("queued", "running"), 120)
+        finally:
+            trainer.send_signal(signal.SIGTERM)
+            trainer.wait(30)
+    assert job.status == "failed" and job.model_id is None
+    assert "ConnectionRefusedError" in job.error or "unreachable" in job.error, job.error
