@@ -3,8 +3,9 @@
 1. Shows the built-in tracks with their physical-limit lap times and draws one.
 2. Creates a fresh league in ``OUT/league-data`` (SQLite): racers and four events on
    built-in tracks (time trial, object avoidance, head-to-bot, head-to-model).
-3. Starts the server, the scheduler and a worker as child processes, uploads the
-   bundled sample models through the API and enters them in every event.
+3. Starts the server, the scheduler, a worker and a trainer (for training jobs, where the
+   host can sandbox them) as child processes, uploads the bundled sample models through
+   the API and enters them in every event.
 4. Shows progress while the first evaluations run, prints each leaderboard, and keeps
    serving (URL printed) until Ctrl-C, SIGTERM or SIGHUP, any of which stops every child
    process, then the demo.
@@ -29,6 +30,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from league.schemas import EventCreate
+from league.settings import Settings
+from league.training.launch import training_refused
 
 SAMPLE_MODELS = (
     "sample-time-trial.zip",
@@ -165,7 +168,7 @@ def _stop_children(processes: list[subprocess.Popen], console: Console) -> None:
         except subprocess.TimeoutExpired:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
-    console.print("stopped the server, the scheduler and the worker")
+    console.print("stopped the league's processes")
 
 
 def _wait_ready(url: str, processes: list[subprocess.Popen], timeout: float = 60.0) -> None:
@@ -250,6 +253,11 @@ def run_demo(
         stack.callback(_stop, processes, console)
         processes.append(_start("server", ["serve", "--port", str(port)], env, logs))
         processes.append(_start("worker", ["worker", "--concurrency", "1"], env, logs))
+        refused = training_refused(Settings(data_dir=data_dir))
+        if refused is None:
+            processes.append(_start("trainer", ["trainer"], env, logs))
+        else:
+            console.print(f"[yellow]no trainer:[/] {refused}")
         _wait_ready(url, processes)
         console.print(f"league running at {url} (logs in {logs})")
         _enter_samples(url, tokens, events)

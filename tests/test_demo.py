@@ -38,6 +38,6 @@ def test_demo_runs_entries_to_leaderboards(tmp_path: Path) -> None:
     for alias in RACERS:  # a row per event for each bundled sample model
         assert out.count(alias) >= 4, alias
     assert "not every first race finished" not in out
-    assert "stopped the server, the scheduler and the worker" in out
+    assert "stopped the league's processes" in out
     with socket.socket() as sock:  # the server is gone
         assert sock.connect_ex(("127.0.0.1", port)) != 0

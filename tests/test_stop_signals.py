@@ -102,7 +102,7 @@ def test_demo_stops_server_worker_and_scheduler(tmp_path: Path, reaper: list, si
     assert len(below) >= 3 and _answers(port)  # server, worker (and its child), scheduler
     _stop_and_check(demo, sig, below, log)
     assert not _answers(port)
-    assert "stopped the server, the scheduler and the worker" in log.read_text()
+    assert "stopped the league's processes" in log.read_text()
 
 
 @pytest.mark.parametrize("workers", [1, 2])
