@@ -33,7 +33,7 @@ from sqlalchemy.orm import Session
 
 from arena.race import RaceResult, run_race
 from league import crud
-from league.db import make_engine, make_session_factory
+from league.jobs.daemon import LeasingDaemon
 from league.jobs.evaluation import (
     EntrySuspended,
     RacePlan,
@@ -57,7 +57,6 @@ from league.jobs.sandbox import SandboxError, SandboxLimits, WarmSandbox, one_th
 from league.models import Entry, Event, Job, Race
 from league.ranking import rate_race
 from league.settings import Settings
-from league.store import open_storage
 from league.store.base import FileStore, StorageError
 from submissions.validator import DEFAULT_LIMITS
 
@@ -118,15 +117,13 @@ def record_result(
     return race
 
 
-class Worker:
+class Worker(LeasingDaemon):
     """One evaluation worker bound to a database and a file store."""
 
+    kind = "worker"
+
     def __init__(self, settings: Settings, name: str | None = None) -> None:
-        self.settings = settings
-        self.name = name or f"{socket.gethostname()}-{os.getpid()}"
-        self.engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
-        self.sessions = make_session_factory(self.engine)
-        self.storage = open_storage(settings)
+        super().__init__(settings, name)
         self.limits = SandboxLimits(
             memory_mb=settings.race_memory_mb,
             cpu_seconds=settings.race_cpu_seconds,
@@ -139,30 +136,11 @@ class Worker:
             high_water_mb=CHILD_HIGH_WATER_MB,
         )
         self.step_budget_ms = settings.race_step_budget_ms or DEFAULT_LIMITS.max_latency_ms
-        self.stopping = False
-        self.backoff = Backoff()
 
-    def stop(self, *_args: object) -> None:
-        """Finish the current race, then leave the loop (signal handler)."""
-        self.stopping = True
-
-    def run_forever(self) -> None:
-        """Work until stopped; back off while the database is unreachable."""
-        for stop_signal in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
-            signal.signal(stop_signal, self.stop)
-        log.info("worker %s started", self.name)
-        while not self.stopping:
-            try:
-                busy = self.run_once()
-                self.backoff.reset()
-            except DB_ERRORS as exc:
-                self._wait_db(exc)
-                continue
-            if not busy:
-                self._sleep(self.settings.poll_seconds)
+    def close(self) -> None:
+        """Stop the warm race child, then release the database."""
         self.sandbox.close()
-        self.engine.dispose()
-        log.info("worker %s stopped", self.name)
+        super().close()
 
     def run_once(self) -> bool:
         """Expire stale leases, lease one job and process it; False when the queue is empty."""
@@ -256,25 +234,6 @@ class Worker:
             holder[0] = renewed
 
         return tick
-
-    def _retry_db(self, action: Callable[[Any], bool]) -> bool:
-        """Run ``action(session)`` until the database answers (or the worker must stop)."""
-        while True:
-            try:
-                with self.sessions() as session:
-                    return action(session)
-            except DB_ERRORS as exc:
-                self._wait_db(exc)
-
-    def _wait_db(self, exc: Exception) -> None:
-        delay = self.backoff.next()
-        log.warning("database unavailable (%s); retrying in %.1f s", type(exc).__name__, delay)
-        self._sleep(delay)
-
-    def _sleep(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while not self.stopping and time.monotonic() < end:
-            time.sleep(min(0.2, end - time.monotonic()))
 
 
 def spawn(index: int) -> subprocess.Popen:

@@ -28,7 +28,6 @@ import os
 import queue
 import shutil
 import signal
-import socket
 import threading
 import time
 import zipfile
@@ -38,12 +37,11 @@ from pathlib import Path
 
 from agents.train_job import PARENT_DIR, RUN_DIR, STOP_FILE
 from league import crud
-from league.db import make_engine, make_session_factory
 from league.http.upload_validation import UploadValidator
-from league.jobs.queue import DB_ERRORS, Backoff
+from league.jobs.daemon import LeasingDaemon
+from league.jobs.queue import DB_ERRORS
 from league.models import Racer, TrainingJob
 from league.settings import Settings
-from league.store import open_storage
 from league.training.launch import limits_of, start_child, stop_child
 from league.training.queue import (
     TrainingLease,
@@ -72,12 +70,13 @@ MAX_SIMTRACE_BYTES = 8 * 1024 * 1024
 MEMORY_WORDS = ("MemoryError", "Cannot allocate memory", "std::bad_alloc")
 
 
-def default_workers(settings: Settings) -> int:
-    """Env worker processes of one job: the host's cores shared among the jobs that may
-    run at once (``training_workers`` when set)."""
-    if settings.training_workers is not None:
-        return settings.training_workers
-    return max(1, (os.cpu_count() or 1) // settings.training_jobs_total)
+def job_machine(settings: Settings) -> dict[str, int | None]:
+    """Env workers and torch threads of one job: the host's cores shared among the jobs
+    that may run at once (``training_workers`` when set; threads as ``slipstream train``
+    picks them when one job has the host to itself)."""
+    share = max(1, (os.cpu_count() or 1) // settings.training_jobs_total)
+    workers = share if settings.training_workers is None else settings.training_workers
+    return {"workers": workers, "threads": share if settings.training_jobs_total > 1 else None}
 
 
 def folder_bytes(path: Path) -> int:
@@ -129,42 +128,21 @@ class LeaseLost(RuntimeError):
     """Another trainer may hold the job now: drop it."""
 
 
-class Trainer:
+class Trainer(LeasingDaemon):
     """One trainer bound to a database and a file store; one job at a time."""
 
-    def __init__(self, settings: Settings, name: str | None = None) -> None:
-        self.settings = settings
-        self.name = name or f"{socket.gethostname()}-{os.getpid()}"
-        self.engine = make_engine(settings.db_url, settings.sqlite_busy_timeout_ms)
-        self.sessions = make_session_factory(self.engine)
-        self.storage = open_storage(settings)
-        self.workers = default_workers(settings)
-        self.root = settings.data_dir / "training" / "jobs"
-        self.stopping = False
-        self.backoff = Backoff()
+    kind = "trainer"
 
-    def stop(self, *_args: object) -> None:
-        """Give the current job back and leave the loop (signal handler)."""
-        self.stopping = True
+    def __init__(self, settings: Settings, name: str | None = None) -> None:
+        super().__init__(settings, name)
+        self.machine = job_machine(settings)
+        self.root = settings.data_dir / "training" / "jobs"
 
     def run_forever(self) -> None:
-        """Train until stopped; back off while the database is unreachable."""
-        for stop_signal in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
-            signal.signal(stop_signal, self.stop)
-        log.info("trainer %s started (%d env workers a job)", self.name, self.workers)
-        while not self.stopping:
-            try:
-                busy = self.run_once()
-                self.backoff.reset()
-            except DB_ERRORS as exc:
-                delay = self.backoff.next()
-                log.warning("database unavailable (%s); retrying in %.1f s", exc, delay)
-                self._sleep(delay)
-                continue
-            if not busy:
-                self._sleep(self.settings.poll_seconds)
-        self.engine.dispose()
-        log.info("trainer %s stopped", self.name)
+        """Train until stopped, behind the API and races on this host (``training_nice``)."""
+        os.nice(self.settings.training_nice)
+        log.info("a training job gets %s", self.machine)
+        super().run_forever()
 
     def run_once(self) -> bool:
         """Expire stale leases, lease one job and run it; False when none may start."""
@@ -196,7 +174,7 @@ class Trainer:
     def _prepare(self, lease: TrainingLease, workdir: Path) -> None:
         with self.sessions() as session:
             job = session.get_one(TrainingJob, lease.job_id)
-            fields = {**job.spec, "workers": self.workers}
+            fields = {**job.spec, **self.machine}
             source = job.reward_source
             parent = session.get(TrainingJob, job.clone_of_id) if job.clone_of_id else None
             parent_run = parent.run_sha256 if parent is not None else None
@@ -208,7 +186,7 @@ class Trainer:
         with self.sessions() as session:
             minutes = session.get_one(TrainingJob, lease.job_id).minutes
         budget = minutes * 60.0 + START_GRACE_S
-        cpu = int(budget * max(1, self.workers + 1)) + 60
+        cpu = int(budget * (self.machine["workers"] + (self.machine["threads"] or 2))) + 60
         try:
             child = start_child([], workdir, self.settings, limits_of(self.settings, cpu))
         except (SandboxUnavailable, OSError) as exc:
@@ -274,9 +252,7 @@ class Trainer:
                     stop_child(child)
             time.sleep(0.1)
 
-    def _drain(
-        self, lines: queue.Queue, watch: _Watch, workdir: Path
-    ) -> list[tuple[str, dict]]:
+    def _drain(self, lines: queue.Queue, watch: _Watch, workdir: Path) -> list[tuple[str, dict]]:
         events: list[tuple[str, dict]] = []
         while True:
             try:
@@ -310,8 +286,8 @@ class Trainer:
     ) -> None:
         """Store what the child made and end the job, or fail it with the reason."""
         failure = _failure(code, watch, self.settings)
-        model_zip = workdir / RUN_DIR / "model" / "model.zip"
-        if failure is not None or not model_zip.is_file():
+        model_zip = job_file(workdir, RUN_DIR, "model", "model.zip")
+        if failure is not None or model_zip is None:
             why = failure or "the job ended without a model (it trained no iteration)"
             self._end(lease, started, "failed", why, workdir)
             return
@@ -370,24 +346,9 @@ class Trainer:
             log.warning("heartbeat failed (%s)", type(exc).__name__)
             return lease, False
 
-    def _retry_db(self, action):
-        while True:
-            try:
-                with self.sessions() as session:
-                    return action(session)
-            except DB_ERRORS as exc:
-                delay = self.backoff.next()
-                log.warning("database unavailable (%s); retrying in %.1f s", exc, delay)
-                time.sleep(delay)
-
     @staticmethod
     def _ran(started: float) -> float:
         return time.monotonic() - started
-
-    def _sleep(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while not self.stopping and time.monotonic() < end:
-            time.sleep(min(0.2, end - time.monotonic()))
 
 
 def _reader(child) -> queue.Queue:
@@ -419,6 +380,17 @@ def _lines(stream) -> Iterator[bytes]:
         yield line
 
 
+def job_file(folder: Path, *parts: str) -> Path | None:
+    """``folder/parts...`` if it is a regular file really inside ``folder``, else None:
+    the job wrote it, and a link it planted must not make the trainer read a host file."""
+    path = folder.joinpath(*parts)
+    try:
+        inside = path.resolve(strict=True).is_relative_to(folder.resolve(strict=True))
+    except (OSError, RuntimeError):
+        return None
+    return path if inside and path.is_file() else None
+
+
 def race_poses(run_dir: Path, iteration: object) -> dict | None:
     """The poses of one race of a training iteration, for the live view: the longest
     episode of its training simtrace, at most :data:`MAX_POSES` steps (x, y, yaw rounded
@@ -426,9 +398,9 @@ def race_poses(run_dir: Path, iteration: object) -> dict | None:
     gives None."""
     if not isinstance(iteration, int) or iteration < 0:
         return None
-    path = run_dir / "0" / "training-simtrace" / f"{iteration}-iteration.csv"
+    path = job_file(run_dir, "0", "training-simtrace", f"{iteration}-iteration.csv")
     try:
-        if path.is_symlink() or path.stat().st_size > MAX_SIMTRACE_BYTES:
+        if path is None or path.stat().st_size > MAX_SIMTRACE_BYTES:
             return None
         episodes: dict[str, list[tuple[float, float, float]]] = {}
         with path.open(newline="") as handle:

@@ -27,6 +27,8 @@ NOT_HTTP = (
     "league.store.s3",
     "league.store.sweep",
     "league.http.upload_validation",  # the validation child, under a memory limit
+    "league.training.queue",
+    "league.training.trainer",
 )
 
 

@@ -18,6 +18,7 @@ from arena import make_config
 from arena.race import run_race
 from league.models import Model, TrainingJob
 from league.training.sandbox import probe
+from league.training.trainer import job_file, race_poses
 from submissions import load_policy
 from tests.league.conftest import Database, League, start_league
 
@@ -166,3 +167,19 @@ def test_a_reward_that_reaches_out_mid_training_fails_its_job(
             trainer.wait(30)
     assert job.status == "failed" and job.model_id is None
     assert "ConnectionRefusedError" in job.error or "unreachable" in job.error, job.error
+
+
+def test_links_a_job_plants_do_not_make_the_trainer_read_host_files(tmp_path: Path) -> None:
+    run = tmp_path / "job" / "run"
+    (run / "model").mkdir(parents=True)
+    secret = tmp_path / "secret.zip"
+    secret.write_bytes(b"PK not the job's")
+    (run / "model" / "model.zip").symlink_to(secret)
+    (run / "0").symlink_to(tmp_path)  # a folder link on the way to the simtrace
+    (tmp_path / "training-simtrace").mkdir()
+    (tmp_path / "training-simtrace" / "0-iteration.csv").write_text("episode,X,Y,yaw\n0,1,2,3\n")
+    assert job_file(tmp_path / "job", "run", "model", "model.zip") is None
+    assert race_poses(run, 0) is None
+    (run / "model" / "model.zip").unlink()
+    (run / "model" / "model.zip").write_bytes(b"PK the job's own")
+    assert job_file(tmp_path / "job", "run", "model", "model.zip") is not None
