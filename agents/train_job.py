@@ -8,10 +8,10 @@ the spec without running any of the racer's code) and in the child.
 
 The child, ``python -m agents.train_job WORKDIR [--check]``, runs inside the trainer's
 sandbox (``league.training.sandbox``). ``WORKDIR`` holds ``job.json`` (the spec plus the
-trainer's ``workers``), ``reward.py`` and, for a clone, the parent run in ``parent/``. With
-``--check`` it loads and pre-checks the reward function and prints one JSON line,
-``{"ok": true}`` or ``{"error": message}``; otherwise it trains into ``WORKDIR/run`` and
-prints one JSON line per iteration (``{"type": "iteration", ...}``) and a last one
+trainer's ``workers`` and ``threads``), ``reward.py`` and, for a clone, the parent run in
+``parent/``. With ``--check`` it loads and pre-checks the reward function and prints one
+JSON line, ``{"ok": true}`` or ``{"error": message}``; otherwise it trains into
+``WORKDIR/run`` and prints one JSON line per iteration (``{"type": "iteration", ...}``) and a last one
 (``{"type": "done", ...}``); anything else it prints is a log line. A ``STOP`` file in
 ``WORKDIR`` (or SIGTERM) stops it as Ctrl-C stops ``slipstream train``: finished work is
 kept and packed.
@@ -85,6 +85,7 @@ def job_settings(
     reward_path: Path,
     minutes: float,
     workers: int | None = None,
+    threads: int | None = None,
     opponent: Path | None = None,
     explicit_hyperparameters: bool = False,
 ) -> TrainSettings:
@@ -97,6 +98,8 @@ def job_settings(
         given["grow_batch"] = False
     if workers is not None:
         given["workers"] = workers
+    if threads is not None:
+        given["threads"] = threads
     if opponent is not None:
         given["opponent"] = [opponent]
     if recipe is None:
@@ -136,6 +139,7 @@ def _train(workdir: Path, job: dict[str, Any]) -> int:
         workdir / REWARD_FILE,
         job["minutes"],
         workers=job.get("workers"),
+        threads=job.get("threads"),
         opponent=opponent,
         explicit_hyperparameters=job.get("hyperparameters") is not None,
     )

@@ -158,6 +158,13 @@ class Settings(BaseSettings):
         description="Env worker processes of one training job; default: the host's cores "
         "shared among training_jobs_total jobs.",
     )
+    training_nice: int = Field(
+        default=10,
+        ge=0,
+        le=19,
+        description="Niceness of trainers and their jobs: on a shared host the API and "
+        "races get the CPU first.",
+    )
     training_memory_mb: int = Field(
         default=4096, gt=0, description="Address space of each process of a training job."
     )

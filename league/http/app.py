@@ -86,14 +86,16 @@ def _install_middleware(app: FastAPI, settings: Settings) -> None:
     upload = BodyRule(
         settings.max_upload_bytes + MULTIPART_OVERHEAD, settings.upload_timeout_seconds
     )
+    training_job = BodyRule(TRAINING_JOB_BODY_BYTES, settings.body_timeout_seconds)
     app.add_middleware(
         BodyLimitMiddleware,
         default=BodyRule(settings.max_body_bytes, settings.body_timeout_seconds),
         routes={
             ("POST", app.url_path_for("upload_model")): upload,
-            ("POST", app.url_path_for("create_training_job")): BodyRule(
-                TRAINING_JOB_BODY_BYTES, settings.body_timeout_seconds
-            ),
+            **{
+                ("POST", app.url_path_for(route)): training_job
+                for route in ("create_training_job", "check_training_job")
+            },
         },
     )
     app.add_middleware(

@@ -86,6 +86,16 @@ def test_a_broken_reward_is_refused_naming_what_is_wrong(
     assert str(league.settings.data_dir) not in detail
 
 
+def test_validate_checks_a_job_without_queuing_it(league: League) -> None:
+    _clear(league)
+    broken = "def reward_function(params):\n    return params['no_such_key']\n"
+    with league.client("alice") as alice:
+        assert alice.post("/api/training-jobs/check", json=_body()).json() == {"ok": True}
+        refused = alice.post("/api/training-jobs/check", json=_body(broken))
+        assert refused.status_code == 422 and "at line 2" in refused.json()["detail"]
+        assert alice.get("/api/training-jobs").json() == []
+
+
 @pytest.mark.parametrize(
     ("options", "expected"),
     [

@@ -31,6 +31,7 @@ from league.schemas import (
     TrainingJobUpdate,
     TrainingQuota,
 )
+from league.settings import Settings
 from league.training.launch import training_refused
 from league.training.queue import (
     QuotaExceeded,
@@ -86,27 +87,18 @@ def _checks(request: Request) -> asyncio.Semaphore:
     return request.app.state.training_checks
 
 
-@router.post(
-    "",
-    status_code=201,
-    response_model=TrainingJobOut,
-    responses={
-        404: {"model": ErrorOut, "description": "clone_of is not one of your jobs"},
-        422: {"model": ErrorOut, "description": "Bad settings, or the reward function fails"},
-        429: {"model": ErrorOut, "description": "Over a training quota"},
-        503: {"model": ErrorOut, "description": "This server cannot sandbox training"},
-    },
-)
-async def create_training_job(
+async def _checked(
     body: TrainingJobCreate,
     request: Request,
-    racer: CurrentRacer,
-    session: SessionDep,
-    settings: SettingsDep,
-) -> TrainingJobOut:
-    """Queue a training job. Its settings and reward function are checked first (the
-    reward in a sandboxed child, as ``slipstream train`` checks it), then the quotas."""
-    refused = training_refused(settings)
+    racer: Racer,
+    session: Session,
+    settings: Settings,
+    quotas: bool,
+) -> dict:
+    """The job's stored fields once its settings, (with ``quotas``) the quotas and its
+    reward function (in a sandboxed child, as ``slipstream train`` checks it) pass; else
+    the HTTP error."""
+    refused = await run_in_threadpool(training_refused, settings)  # probes once: ~0.1 s
     if refused:
         raise HTTPException(503, refused)
     if body.clone_of is not None:
@@ -116,13 +108,43 @@ async def create_training_job(
     fields = job_fields(body.options, body.recipe, body.hyperparameters, body.minutes)
     try:
         check_settings(fields, cloned=body.clone_of is not None)
-        _quotas(session, settings, racer.id, body.minutes)
+        if quotas:
+            _quotas(session, settings, racer.id, body.minutes)
         async with _checks(request):
             await run_in_threadpool(check_reward, settings, fields, body.reward_source)
     except JobRefused as exc:
         raise HTTPException(422, str(exc)) from None
     except SandboxUnavailable as exc:
         raise HTTPException(503, str(exc)) from None
+    return fields
+
+
+REFUSALS = {
+    422: {"model": ErrorOut, "description": "Bad settings, or the reward function fails"},
+    503: {"model": ErrorOut, "description": "This server cannot sandbox training"},
+}
+
+
+@router.post(
+    "",
+    status_code=201,
+    response_model=TrainingJobOut,
+    responses={
+        **REFUSALS,
+        404: {"model": ErrorOut, "description": "clone_of is not one of your jobs"},
+        429: {"model": ErrorOut, "description": "Over a training quota"},
+    },
+)
+async def create_training_job(
+    body: TrainingJobCreate,
+    request: Request,
+    racer: CurrentRacer,
+    session: SessionDep,
+    settings: SettingsDep,
+) -> TrainingJobOut:
+    """Queue a training job. Its settings are checked first, then the quotas, then its
+    reward function in a sandboxed child, as ``slipstream train`` checks it."""
+    fields = await _checked(body, request, racer, session, settings, quotas=True)
     _quotas(session, settings, racer.id, body.minutes)  # the check took a while
     job = TrainingJob(
         owner_id=racer.id,
@@ -137,7 +159,21 @@ async def create_training_job(
     return job_out(job)
 
 
-def _quotas(session: Session, settings, racer_id: int, minutes: float) -> None:
+@router.post("/check", responses=REFUSALS)
+async def check_training_job(
+    body: TrainingJobCreate,
+    request: Request,
+    racer: CurrentRacer,
+    session: SessionDep,
+    settings: SettingsDep,
+) -> dict[str, bool]:
+    """Validate a job without queuing it (DeepRacer's Validate button): its settings and
+    its reward function, sandboxed; ``{"ok": true}``, or 422 naming the line."""
+    await _checked(body, request, racer, session, settings, quotas=False)
+    return {"ok": True}
+
+
+def _quotas(session: Session, settings: Settings, racer_id: int, minutes: float) -> None:
     try:
         check_quotas(session, settings, racer_id, minutes)
     except QuotaExceeded as exc:
