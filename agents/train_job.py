@@ -11,10 +11,10 @@ sandbox (``league.training.sandbox``). ``WORKDIR`` holds ``job.json`` (the spec 
 trainer's ``workers`` and ``threads``), ``reward.py`` and, for a clone, the parent run in
 ``parent/``. With ``--check`` it loads and pre-checks the reward function and prints one
 JSON line, ``{"ok": true}`` or ``{"error": message}``; otherwise it trains into
-``WORKDIR/run`` and prints one JSON line per iteration (``{"type": "iteration", ...}``) and a last one
-(``{"type": "done", ...}``); anything else it prints is a log line. A ``STOP`` file in
-``WORKDIR`` (or SIGTERM) stops it as Ctrl-C stops ``slipstream train``: finished work is
-kept and packed.
+``WORKDIR/run`` and prints one JSON line per iteration (``{"type": "iteration", ...}``)
+and a last one (``{"type": "done", ...}``); anything else it prints is a log line. A
+``STOP`` file in ``WORKDIR`` (or SIGTERM) stops it as Ctrl-C stops ``slipstream train``:
+finished work is kept and packed.
 """
 
 from __future__ import annotations
