@@ -18,11 +18,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from league.models import TrainingEvent, TrainingJob
+from league.training.queue import ENDED
 
 POLL_SECONDS = 0.5
 KEEPALIVE_SECONDS = 15.0
 BATCH = 500
-ENDED = ("done", "failed", "stopped")
 
 
 @dataclass(frozen=True)

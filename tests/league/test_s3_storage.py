@@ -222,11 +222,11 @@ def test_sweep_removes_only_old_unreferenced_objects(
     everything = set(s3.keys("sweep/"))
 
     report = sweep(sessions, storage, grace_s=600)  # all younger than the grace period
-    assert (report.temp, report.unreferenced) == (0, {"models": 0, "traces": 0})
+    assert (report.temp, report.unreferenced) == (0, {"models": 0, "traces": 0, "runs": 0})
     assert set(s3.keys("sweep/")) == everything
 
     report = sweep(sessions, storage, grace_s=600, now=time.time() + 601)
-    assert (report.temp, report.unreferenced) == (1, {"models": 1, "traces": 1})
+    assert (report.temp, report.unreferenced) == (1, {"models": 1, "traces": 1, "runs": 0})
     gone = {storage.key("models", orphans[0]), storage.key("traces", orphans[1]), stale_probe}
     assert set(s3.keys("sweep/")) == everything - gone
     assert storage.read("models", model_sha) and storage.read("traces", trace_sha)

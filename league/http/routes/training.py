@@ -1,7 +1,7 @@
 """``/api/training-jobs``: racers train models on the league's trainers.
 
-Creating a job checks its settings here and its reward function in a sandboxed child
-(:mod:`league.training.spec`), then checks the admin's quotas; trainers
+Creating a job checks its settings here, the admin's quotas, then its reward function in
+a sandboxed child (:mod:`league.training.spec`); trainers
 (``slipstream league trainer``) run it. Racers see and stop their own jobs; admins see,
 stop and re-prioritise everyone's. Progress is readable as lists (``/metrics``, ``/logs``)
 and live as Server-Sent Events (``/events``).
