@@ -124,10 +124,30 @@ def _check(workdir: Path, job: dict[str, Any]) -> int:
     return 0
 
 
+def _resumed(workdir: Path, job: dict[str, Any]) -> Any:
+    """The trainer that continues the run in ``WORKDIR/run`` with its own settings, for
+    the job's budget, on this trainer's machine share and with the job's reward file."""
+    from agents.settings import load_settings
+    from agents.train import Trainer
+
+    run = workdir / RUN_DIR
+    changes = {
+        "reward_fn": str(workdir / REWARD_FILE),
+        "minutes": job["minutes"],
+        "iterations": None,
+        "workers": job.get("workers"),
+        "threads": job.get("threads"),
+    }
+    return Trainer(load_settings(run).model_copy(update=changes), run, resume=True)
+
+
 def _train(workdir: Path, job: dict[str, Any]) -> int:
     from agents.hyperparameters import Hyperparameters
     from agents.recipes import parent_model
     from agents.train import Trainer
+
+    if job.get("resume"):
+        return _run(_resumed(workdir, job))
 
     parent = workdir / PARENT_DIR
     clone = parent if parent.is_dir() else None
@@ -147,8 +167,12 @@ def _train(workdir: Path, job: dict[str, Any]) -> int:
         hp = Hyperparameters(**job["hyperparameters"])
     else:
         hp = recipe.hyperparameters_model() if recipe else None
-    trainer = Trainer(settings, workdir / RUN_DIR, hp, clone=clone)
-    _stop_when_asked(workdir / STOP_FILE)
+    return _run(Trainer(settings, workdir / RUN_DIR, hp, clone=clone))
+
+
+def _run(trainer: Any) -> int:
+    """Train, printing each iteration and how it ended as JSON lines."""
+    _stop_when_asked(trainer.run_dir.parent / STOP_FILE)
 
     def on_iteration(stats: Any) -> None:
         record = asdict(stats)

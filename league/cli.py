@@ -533,6 +533,13 @@ def train_on_server(
         int | None,
         typer.Option(help="Start from the run of one of your training jobs (its id)."),
     ] = None,
+    resume: Annotated[
+        int | None,
+        typer.Option(
+            help="Continue the run of one of your training jobs (its id) for --minutes more, "
+            "with its settings (and its reward, unless --reward-fn is given)."
+        ),
+    ] = None,
     wait: Annotated[
         bool, typer.Option("--wait", help="Follow the job's progress until it ends.")
     ] = False,
@@ -560,16 +567,19 @@ def train_on_server(
     }
     body: dict = {
         "name": name,
-        "reward_source": _reward_source(reward_fn or _default_reward(recipe)),
         "options": {key: value for key, value in given.items() if value is not None},
         "minutes": minutes,
     }
+    if resume is None or reward_fn is not None:
+        body["reward_source"] = _reward_source(reward_fn or _default_reward(recipe))
     if recipe is not None:
         body["recipe"] = recipe
     if hyperparameters is not None:
         body["hyperparameters"] = _hyperparameters_of(hyperparameters)
     if clone is not None:
         body["clone_of"] = clone
+    if resume is not None:
+        body["resume_of"] = resume
     try:
         with LeagueClient(server, token) as client:
             job = client.create_training_job(body)

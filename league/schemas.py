@@ -301,10 +301,12 @@ class TrainingJobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: ModelName = Field(description="The model's name once trained.")
-    reward_source: str = Field(
+    reward_source: str | None = Field(
+        default=None,
         min_length=1,
         max_length=64 * 1024,
-        description="The reward function's Python source (DeepRacer's reward_function(params)).",
+        description="The reward function's Python source (DeepRacer's reward_function(params)); "
+        "a resumed run keeps its own when this is left out.",
     )
     options: dict[str, OptionValue] = Field(
         default_factory=dict,
@@ -319,6 +321,13 @@ class TrainingJobCreate(BaseModel):
     minutes: float = Field(gt=0, le=24 * 60, description="Training budget in minutes.")
     clone_of: int | None = Field(
         default=None, ge=1, le=MAX_ID, description="Start from the run of one of your jobs."
+    )
+    resume_of: int | None = Field(
+        default=None,
+        ge=1,
+        le=MAX_ID,
+        description="Continue the run of one of your jobs for ``minutes`` more, with its "
+        "settings and hyperparameters (no options, recipe or hyperparameters here).",
     )
 
 
@@ -343,6 +352,7 @@ class TrainingJobOut(_Out):
     hyperparameters: dict[str, Any] | None
     minutes: float
     clone_of: int | None
+    resume_of: int | None
     attempts: int
     error: str | None
     stop_requested: bool

@@ -179,8 +179,9 @@ class Trainer(LeasingDaemon):
             parent = session.get(TrainingJob, job.clone_of_id) if job.clone_of_id else None
             parent_run = parent.run_sha256 if parent is not None else None
         write_workdir(workdir, fields, source)
-        if parent_run is not None:
-            unzip_run(self.storage.read("runs", parent_run), workdir / PARENT_DIR)
+        if parent_run is not None:  # a resumed run goes on in place; a clone starts from it
+            into = RUN_DIR if fields.get("resume") else PARENT_DIR
+            unzip_run(self.storage.read("runs", parent_run), workdir / into)
 
     def _run(self, lease: TrainingLease, workdir: Path, started: float) -> None:
         with self.sessions() as session:

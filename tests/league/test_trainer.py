@@ -126,6 +126,8 @@ def test_a_killed_trainers_job_is_finished_by_another_and_its_model_races(
         assert "[running]" in logs and "lease expired" in logs
         run = alice.get(f"/api/training-jobs/{job_id}/run.zip")
         assert run.status_code == 200 and run.content[:2] == b"PK"
+    resumed = _resume(league, job_id, metrics[-1]["iteration"], tmp_path)
+    assert resumed.model_id is not None and resumed.model_id != job.model_id
     with league.sessions() as session:
         model = session.get_one(Model, job.model_id)
         assert model.name == JOB["name"] and model.owner_id == league.ids["alice"]
@@ -141,6 +143,31 @@ def test_a_killed_trainers_job_is_finished_by_another_and_its_model_races(
     config = config.model_copy(update={"laps": 1, "time_limit_s": 10.0})
     raced = run_race(config, {"car0": policy})
     assert raced.car("car0").distance > 5.0  # it drives
+
+
+def _resume(league: League, job_id: int, last_iteration: int, tmp_path: Path) -> TrainingJob:
+    """Resume ``job_id`` for a few seconds on a fresh trainer: its iterations go on from
+    ``last_iteration``, and it ends with a model of its own."""
+    with league.client("alice") as alice:
+        body = {"name": "resumed", "resume_of": job_id, "minutes": 0.25}
+        refused = alice.post("/api/training-jobs", json={**body, "options": {"seed": 3}})
+        assert refused.status_code == 422 and "keeps its settings" in refused.text
+        created = alice.post("/api/training-jobs", json=body)
+        assert created.status_code == 201, created.text
+        resumed_id = created.json()["id"]
+        assert created.json()["resume_of"] == job_id and created.json()["clone_of"] is None
+        trainer = _trainer(league, "resumer", tmp_path / "resumer.log")
+        try:
+            resumed = _wait_for(
+                league, resumed_id, lambda j: j.status not in ("queued", "running"), 180
+            )
+        finally:
+            trainer.send_signal(signal.SIGTERM)
+            trainer.wait(30)
+        assert resumed.status == "done", resumed.error
+        metrics = alice.get(f"/api/training-jobs/{resumed_id}/metrics").json()
+        assert metrics[0]["iteration"] == last_iteration + 1
+    return resumed
 
 
 def test_a_reward_that_reaches_out_mid_training_fails_its_job(

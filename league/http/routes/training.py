@@ -19,6 +19,7 @@ from fastapi.responses import Response, StreamingResponse
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+from agents.recipes import get_recipe
 from league.http.auth import AdminRacer, CurrentRacer
 from league.http.deps import SessionDep, SettingsDep, StorageDep
 from league.http.training_feed import TrainingFeed
@@ -61,7 +62,8 @@ def job_out(job: TrainingJob) -> TrainingJobOut:
         recipe=spec.get("recipe"),
         hyperparameters=spec.get("hyperparameters"),
         minutes=job.minutes,
-        clone_of=job.clone_of_id,
+        clone_of=None if spec.get("resume") else job.clone_of_id,
+        resume_of=job.clone_of_id if spec.get("resume") else None,
         attempts=job.attempts,
         error=job.error,
         stop_requested=job.stop_requested_at is not None,
@@ -101,22 +103,59 @@ async def _checked(
     refused = await run_in_threadpool(training_refused, settings)  # probes once: ~0.1 s
     if refused:
         raise HTTPException(503, refused)
-    if body.clone_of is not None:
-        parent = _visible(session, racer, body.clone_of)
-        if parent.run_sha256 is None:
-            raise HTTPException(422, f"clone_of: training job {parent.id} has no stored run.")
     fields = job_fields(body.options, body.recipe, body.hyperparameters, body.minutes)
+    parent = _parent(session, racer, body)
+    if body.resume_of is not None:  # the run's own settings: checked as they were stored
+        stored = parent.spec
+        fields = job_fields(stored["options"], stored["recipe"], None, body.minutes)
+        fields["resume"] = True
     try:
-        check_settings(fields, cloned=body.clone_of is not None)
+        check_settings(fields, cloned=body.clone_of is not None or body.resume_of is not None)
         if quotas:
             _quotas(session, settings, racer.id, body.minutes)
         async with _checks(request):
-            await run_in_threadpool(check_reward, settings, fields, body.reward_source)
+            source = _reward_source(body, parent)
+            await run_in_threadpool(check_reward, settings, fields, source)
     except JobRefused as exc:
         raise HTTPException(422, str(exc)) from None
     except SandboxUnavailable as exc:
         raise HTTPException(503, str(exc)) from None
     return fields
+
+
+def _parent(session: Session, racer: Racer, body: TrainingJobCreate) -> TrainingJob | None:
+    """The job whose stored run ``body`` clones or resumes (one of the caller's), if any;
+    422 for a job without a run, or a request that both clones and resumes, or resumes with
+    settings of its own."""
+    if body.clone_of is not None and body.resume_of is not None:
+        raise HTTPException(422, "Give clone_of or resume_of, not both.")
+    if body.resume_of is not None and (body.options or body.recipe or body.hyperparameters):
+        raise HTTPException(
+            422, "resume_of: a resumed run keeps its settings; give no options, recipe or "
+            "hyperparameters (clone_of starts a new run from it instead)."
+        )  # fmt: skip
+    parent_id = body.clone_of or body.resume_of
+    if parent_id is None:
+        return None
+    field = "clone_of" if body.clone_of else "resume_of"
+    parent = _visible(session, racer, parent_id)
+    if parent.run_sha256 is None:
+        raise HTTPException(422, f"{field}: training job {parent.id} has no stored run.")
+    recipe = parent.spec.get("recipe")
+    if body.resume_of is not None and recipe and get_recipe(recipe).parent is not None:
+        raise HTTPException(
+            422, f"resume_of: job {parent.id} races against its parent's model; clone it."
+        )
+    return parent
+
+
+def _reward_source(body: TrainingJobCreate, parent: TrainingJob | None) -> str:
+    """The reward to train with: the body's, else (resuming) the parent job's."""
+    if body.reward_source is not None:
+        return body.reward_source
+    if body.resume_of is not None and parent is not None:
+        return parent.reward_source
+    raise HTTPException(422, "reward_source: a new run needs its reward function's source.")
 
 
 REFUSALS = {
@@ -146,13 +185,14 @@ async def create_training_job(
     reward function in a sandboxed child, as ``slipstream train`` checks it."""
     fields = await _checked(body, request, racer, session, settings, quotas=True)
     _quotas(session, settings, racer.id, body.minutes)  # the check took a while
+    parent = _parent(session, racer, body)
     job = TrainingJob(
         owner_id=racer.id,
         name=body.name,
         spec=fields,
-        reward_source=body.reward_source,
+        reward_source=_reward_source(body, parent),
         minutes=body.minutes,
-        clone_of_id=body.clone_of,
+        clone_of_id=parent.id if parent is not None else None,
     )
     session.add(job)
     session.commit()
