@@ -22,13 +22,14 @@ from typing import Any
 
 import boto3
 import pytest
+from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from league import crud
 from league.db import make_engine, make_session_factory
 from league.jobs.worker import Worker
 from league.migrations import upgrade
-from league.models import Event, Job
+from league.models import Event, Job, Racer, TrainingJob
 from league.schemas import EventCreate
 from league.store import open_storage
 from league.store.base import DigestMismatch, StorageError
@@ -215,21 +216,30 @@ def test_sweep_removes_only_old_unreferenced_objects(
 ) -> None:
     storage = s3.storage("sweep")
     model_sha, trace_sha = _reference(sessions, storage, tmp_path)
-    orphans = [storage.put("models", b"no row")[0], storage.put("traces", b"no race")[0]]
+    run_sha = storage.put("runs", b"a training run's folder, zipped")[0]
+    with sessions() as session:  # a training job's run, kept
+        owner = session.scalars(select(Racer)).first()
+        job = TrainingJob(owner_id=owner.id, name="run", spec={}, reward_source="", minutes=1)
+        job.status, job.run_sha256 = "done", run_sha
+        session.add(job)
+        session.commit()
+    orphans = [storage.put(kind, b"no row")[0] for kind in ("models", "traces", "runs")]
     stray, stale_probe = "sweep/models/README", "sweep/.tmp-probe-left-behind"
     for key in (stray, stale_probe):
         storage.client.put_object(Bucket=BUCKET, Key=key, Body=b"x")
     everything = set(s3.keys("sweep/"))
 
     report = sweep(sessions, storage, grace_s=600)  # all younger than the grace period
-    assert (report.temp, report.unreferenced) == (0, {"models": 0, "traces": 0, "runs": 0})
+    assert (report.temp, report.unreferenced) == (0, dict.fromkeys(("models", "traces", "runs"), 0))
     assert set(s3.keys("sweep/")) == everything
 
     report = sweep(sessions, storage, grace_s=600, now=time.time() + 601)
-    assert (report.temp, report.unreferenced) == (1, {"models": 1, "traces": 1, "runs": 0})
-    gone = {storage.key("models", orphans[0]), storage.key("traces", orphans[1]), stale_probe}
-    assert set(s3.keys("sweep/")) == everything - gone
+    assert (report.temp, report.unreferenced) == (1, {"models": 1, "traces": 1, "runs": 1})
+    kinds = ("models", "traces", "runs")
+    gone = {storage.key(kind, sha) for kind, sha in zip(kinds, orphans, strict=True)}
+    assert set(s3.keys("sweep/")) == everything - gone - {stale_probe}
     assert storage.read("models", model_sha) and storage.read("traces", trace_sha)
+    assert storage.read("runs", run_sha) == b"a training run's folder, zipped"
 
 
 def test_an_orphan_stored_again_or_wanted_meanwhile_is_kept(
