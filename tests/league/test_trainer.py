@@ -88,6 +88,18 @@ def _wait_for(league: League, job_id: int, done, timeout: float) -> TrainingJob:
     raise AssertionError(f"training job {job_id} never got there")
 
 
+def _train_to_end(
+    league: League, job_id: int, name: str, tmp_path: Path, timeout: float
+) -> TrainingJob:
+    """Start a trainer (its log in ``tmp_path/NAME.log``) until ``job_id`` has ended."""
+    trainer = _trainer(league, name, tmp_path / f"{name}.log")
+    try:
+        return _wait_for(league, job_id, lambda j: j.status not in ("queued", "running"), timeout)
+    finally:
+        trainer.send_signal(signal.SIGTERM)
+        trainer.wait(30)
+
+
 def _job_processes(marker: str) -> list[str]:
     found = subprocess.run(["pgrep", "-af", marker], capture_output=True, text=True)
     return [line for line in found.stdout.splitlines() if "pgrep" not in line]
@@ -111,12 +123,7 @@ def test_a_killed_trainers_job_is_finished_by_another_and_its_model_races(
             assert _job_processes(f"training/jobs/{job_id}-1") == []  # died with its trainer
         finally:
             first.kill()
-        second = _trainer(league, "second", tmp_path / "second.log")
-        try:
-            job = _wait_for(league, job_id, lambda j: j.status not in ("queued", "running"), 240)
-        finally:
-            second.send_signal(signal.SIGTERM)
-            second.wait(30)
+        job = _train_to_end(league, job_id, "second", tmp_path, 240)
         log = (tmp_path / "second.log").read_text()
         assert job.status == "done", f"{job.error}\n{log[-3000:]}"
         assert job.attempts == 2 and job.model_id is not None and job.run_sha256
@@ -156,14 +163,7 @@ def _resume(league: League, job_id: int, last_iteration: int, tmp_path: Path) ->
         assert created.status_code == 201, created.text
         resumed_id = created.json()["id"]
         assert created.json()["resume_of"] == job_id and created.json()["clone_of"] is None
-        trainer = _trainer(league, "resumer", tmp_path / "resumer.log")
-        try:
-            resumed = _wait_for(
-                league, resumed_id, lambda j: j.status not in ("queued", "running"), 180
-            )
-        finally:
-            trainer.send_signal(signal.SIGTERM)
-            trainer.wait(30)
+        resumed = _train_to_end(league, resumed_id, "resumer", tmp_path, 180)
         assert resumed.status == "done", resumed.error
         metrics = alice.get(f"/api/training-jobs/{resumed_id}/metrics").json()
         assert metrics[0]["iteration"] == last_iteration + 1
@@ -180,18 +180,12 @@ def test_a_reward_that_reaches_out_mid_training_fails_its_job(
         "        socket.create_connection(('127.0.0.1', 5432), timeout=2)\n"
         "    return 1.0\n"
     )
-    body = {**JOB, "reward_source": reward, "recipe": None, "options": {"sensors": "lidar"}}
-    body["options"] = {"track": "slipstream_speedway", "sensors": "camera"}
+    body = {**JOB, "reward_source": reward, "recipe": None}
     with league.client("bob") as bob:
         created = bob.post("/api/training-jobs", json=body)
         assert created.status_code == 201, created.text
         job_id = created.json()["id"]
-        trainer = _trainer(league, "third", tmp_path / "third.log")
-        try:
-            job = _wait_for(league, job_id, lambda j: j.status not in ("queued", "running"), 120)
-        finally:
-            trainer.send_signal(signal.SIGTERM)
-            trainer.wait(30)
+        job = _train_to_end(league, job_id, "third", tmp_path, 120)
     assert job.status == "failed" and job.model_id is None
     assert "ConnectionRefusedError" in job.error or "unreachable" in job.error, job.error
 
