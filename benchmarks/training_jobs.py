@@ -9,7 +9,8 @@ Three measurements on one data directory (SQLite), one table:
    samples/s from the job's iterations.
 3. API reads (``GET /api/events`` and a leaderboard) paced by wrk, pinned to the last core,
    with no training and then while two jobs train on two trainers (each given half the
-   cores): p50 and p99.
+   cores; kept off wrk's core unless ``--no-spare-load-core``, so that wrk times the
+   server and not its own waits for a core): p50 and p99.
 
 samples/s counts the iterations after the first (start-up apart), from the run's own
 elapsed time, evaluations included. Needs wrk and bubblewrap.
@@ -93,11 +94,20 @@ def wait_for(client: httpx.Client, job_ids: list[int], states: set[str], timeout
     raise RuntimeError(f"jobs {job_ids} did not reach {states} within {timeout:g} s")
 
 
-def trainers(count: int, env: dict[str, str]) -> list[subprocess.Popen]:
-    """Start ``count`` trainer processes."""
+def trainers(
+    count: int, env: dict[str, str], cores: set[int] | None = None
+) -> list[subprocess.Popen]:
+    """Start ``count`` trainer processes (on ``cores`` only, when given)."""
     command = [sys.executable, "-m", "league", "trainer"]
+    pin = None if cores is None else lambda: os.sched_setaffinity(0, cores)
     return [
-        subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        subprocess.Popen(
+            command,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            preexec_fn=pin,
+        )
         for _ in range(count)
     ]
 
@@ -126,6 +136,12 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=1, help="env workers of each run")
     parser.add_argument("--seconds", type=float, default=15, help="length of each wrk run")
     parser.add_argument("--rate", type=float, default=100, help="paced reads per second")
+    parser.add_argument(
+        "--spare-load-core",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep the two jobs off wrk's core, so wrk times the server, not its own waits",
+    )
     add_record_option(parser)
     args = parser.parse_args()
     core = (os.cpu_count() or 1) - 1
@@ -168,7 +184,8 @@ def main() -> None:
             stop(running)
             table.add_row("one training job, alone", f"{job_rate(client, one):.0f}", *[""] * 4)
             two = [submit(client, args.minutes), submit(client, args.minutes)]
-            running = trainers(2, env)
+            others = set(range(core)) or None  # wrk's core stays the load generator's
+            running = trainers(2, env, others if args.spare_load_core else None)
             wait_for(client, two, {"running"}, 120)
             time.sleep(20)  # both past start-up
             busy = reads(server.url, event, args.seconds, core, pacer)
@@ -179,7 +196,8 @@ def main() -> None:
     table.notes.append(
         f"{args.workers} env worker(s) a run, {args.minutes:g} min budgets, camera on "
         f"slipstream_speedway, reward {REWARD}; wrk paced at {args.rate:g} req/s on core "
-        f"{core}, 8 connections, {args.seconds:g} s a route."
+        f"{core}, 8 connections, {args.seconds:g} s a route; the two jobs "
+        + ("kept off wrk's core." if args.spare_load_core else "on every core.")
     )
     write(table, args.record)
 
