@@ -107,6 +107,17 @@ def job_settings(
     return get_recipe(recipe).settings(given)
 
 
+def read_record(line: str) -> dict[str, Any] | None:
+    """The JSON object a line of the child's output holds, or None (a log line)."""
+    if not line.startswith("{"):
+        return None
+    try:
+        value = json.loads(line)
+    except ValueError:
+        return None
+    return value if isinstance(value, dict) else None
+
+
 def _emit(record: dict[str, Any]) -> None:
     print(json.dumps(record, separators=(",", ":"), default=str), flush=True)
 

@@ -6,8 +6,8 @@ and by trainers; the API process itself never runs a racer's code.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
-import resource
 import signal
 import subprocess
 import sys
@@ -17,6 +17,7 @@ from league.settings import Settings
 from league.training.sandbox import (
     ConfinementLimits,
     SandboxUnavailable,
+    apply_limits,
     confined_popen,
     kill_confined,
     probe,
@@ -48,16 +49,6 @@ def training_refused(settings: Settings) -> str | None:
     )
 
 
-def _rlimits(limits: ConfinementLimits) -> None:
-    mib = 1024 * 1024
-    for which, value in (
-        (resource.RLIMIT_AS, limits.memory_mb * mib),
-        (resource.RLIMIT_CPU, limits.cpu_seconds),
-        (resource.RLIMIT_FSIZE, limits.file_mb * mib),
-    ):
-        resource.setrlimit(which, (value, value))
-
-
 def start_child(
     args: list[str], workdir: Path, settings: Settings, limits: ConfinementLimits
 ) -> subprocess.Popen[bytes]:
@@ -74,7 +65,7 @@ def start_child(
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         start_new_session=True,
-        preexec_fn=lambda: _rlimits(limits),
+        preexec_fn=functools.partial(apply_limits, limits),
     )
 
 

@@ -212,8 +212,9 @@ def _bwrap_argv(
     return [*args, "--chdir", str(workdir), "--", *argv]
 
 
-def _limit(limits: ConfinementLimits) -> None:
-    """``preexec_fn`` of bwrap: the rlimits (inherited by all inside), die with the parent."""
+def apply_limits(limits: ConfinementLimits) -> None:
+    """``preexec_fn`` of bwrap (or of an unconfined child): the rlimits, inherited by all
+    it starts, and death with the parent."""
     for which, value in (
         (resource.RLIMIT_AS, limits.memory_mb * MiB),
         (resource.RLIMIT_CPU, limits.cpu_seconds),
@@ -262,7 +263,7 @@ def _start(
         cwd="/",
         close_fds=True,
         start_new_session=True,
-        preexec_fn=functools.partial(_limit, limits),
+        preexec_fn=functools.partial(apply_limits, limits),
     )
 
 

@@ -15,7 +15,7 @@ from pydantic import ValidationError
 
 from agents.hyperparameters import Hyperparameters
 from agents.recipes import get_recipe
-from agents.train_job import JOB_FILE, REWARD_FILE, job_settings
+from agents.train_job import JOB_FILE, REWARD_FILE, job_settings, read_record
 from league.settings import Settings
 from league.training.launch import CHECK_CPU_SECONDS, limits_of, start_child, stop_child
 
@@ -98,10 +98,7 @@ def check_reward(settings: Settings, fields: dict[str, Any], reward_source: str)
 
 def _last_json(out: bytes) -> dict[str, Any]:
     for line in reversed(out.decode("utf-8", "replace").splitlines()):
-        try:
-            value = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(value, dict):
-            return value
+        record = read_record(line)
+        if record is not None:
+            return record
     return {}

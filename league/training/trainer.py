@@ -22,7 +22,6 @@ from __future__ import annotations
 import asyncio
 import csv
 import io
-import json
 import logging
 import os
 import queue
@@ -35,7 +34,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agents.train_job import PARENT_DIR, RUN_DIR, STOP_FILE
+from agents.train_job import PARENT_DIR, RUN_DIR, STOP_FILE, read_record
 from league import crud
 from league.http.upload_validation import UploadValidator
 from league.jobs.daemon import LeasingDaemon
@@ -264,7 +263,7 @@ class Trainer(LeasingDaemon):
                 watch.output_ended = True
                 continue
             text = raw.decode("utf-8", "replace").rstrip()[:MAX_LINE]
-            record = _json_record(text)
+            record = read_record(text)
             if record is not None and record.get("type") == "iteration":
                 record.pop("type")
                 events.append(("iteration", record))
@@ -421,16 +420,6 @@ def race_poses(run_dir: Path, iteration: object) -> dict | None:
         "y": [round(p[1], 3) for p in poses],
         "yaw": [round(p[2], 3) for p in poses],
     }
-
-
-def _json_record(text: str) -> dict | None:
-    if not text.startswith("{"):
-        return None
-    try:
-        value = json.loads(text)
-    except ValueError:
-        return None
-    return value if isinstance(value, dict) else None
 
 
 def _failure(code: int | None, watch: _Watch, settings: Settings) -> str | None:
