@@ -1,4 +1,4 @@
-"""The HTML pages: home, event leaderboard, race replay, model page and upload form.
+"""The HTML pages: home, event leaderboard, race replay, model page, upload form and the garage.
 
 Pages are server-rendered shells; public data is filled in here or fetched by the page's
 script from the JSON API. The public pages are rendered once per results version and
@@ -148,3 +148,27 @@ def model_page(request: Request, model_id: Id) -> HTMLResponse:
 def upload_page(request: Request) -> HTMLResponse:
     """Upload a model with your token, and list your models."""
     return _page(request, "upload.html")
+
+
+@router.get("/garage", response_class=HTMLResponse)
+def garage_page(request: Request) -> HTMLResponse:
+    """The racer's models and training jobs: create, clone, stop, delete."""
+    return _page(request, "garage.html")
+
+
+@router.get("/garage/new", response_class=HTMLResponse)
+def create_model_page(request: Request) -> HTMLResponse:
+    """Create a model: track, race type, sensors, action space, reward function, training."""
+    return _page(request, "garage_new.html")
+
+
+@router.get("/garage/jobs/{job_id}", response_class=HTMLResponse)
+def training_page(request: Request, job_id: Id) -> HTMLResponse:
+    """One training job: the live reward graph and top-down view, evaluate, submit."""
+    return _page(request, "training.html", job_id=job_id)
+
+
+@router.get("/garage/bench", response_class=HTMLResponse)
+def bench_page(request: Request) -> HTMLResponse:
+    """The analysis bench: re-score a stored trace with a new reward, compare runs."""
+    return _page(request, "bench.html")
