@@ -8,20 +8,22 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from datetime import datetime
+from datetime import datetime, timedelta
 from typing import TYPE_CHECKING
 
 from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from arena.config import BotConfig, ObstacleConfig
 from league.jobs.queue import evaluation_jobs
 from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, utcnow
 from league.rulesets import event_config
-from league.schemas import EventCreate
+from league.schemas import EvaluationCreate, EventCreate
 from league.store.base import FileStore
 from league.tokens import hash_token, new_token, revoked_hash
 from submissions import ModelInfo
+from tracks.catalog import get_track
 
 if TYPE_CHECKING:
     from arena.race import RaceResult
@@ -37,6 +39,10 @@ class EntryLimit(Conflict):
 
 class QueueFull(Conflict):
     """The racer's queued evaluation jobs plus the entry's would pass their cap (retry later)."""
+
+
+EVALUATION_OPEN = timedelta(hours=24)
+"""How long an evaluation event stays open (its jobs race while it is)."""
 
 
 class UnknownRacer(LookupError):
@@ -87,15 +93,17 @@ def revoke_token(session: Session, racer: Racer) -> None:
     session.commit()
 
 
-def create_event(session: Session, spec: EventCreate, created_by: int | None) -> Event:
-    """Freeze the ruleset and store the event (``ValueError`` with a reason if invalid)."""
+def _new_event(spec: EventCreate, created_by: int | None, kind: str = "league") -> Event:
+    """The event ``spec`` describes with its ruleset frozen, not yet added to a session
+    (``ValueError`` with a reason if invalid)."""
     config = event_config(spec)
     opens_at = spec.opens_at or utcnow()
     if spec.closes_at is not None and spec.closes_at <= opens_at:
         raise ValueError("closes_at must be later than opens_at")
     if spec.round_interval_s is not None and spec.race_type != "head_to_model":
         raise ValueError("round_interval_s is for head_to_model events only")
-    event = Event(
+    return Event(
+        kind=kind,
         name=spec.name,
         race_type=spec.race_type,
         track=spec.track,
@@ -110,9 +118,56 @@ def create_event(session: Session, spec: EventCreate, created_by: int | None) ->
         next_round_at=opens_at if spec.round_interval_s else None,
         created_by=created_by,
     )
+
+
+def create_event(session: Session, spec: EventCreate, created_by: int | None) -> Event:
+    """Freeze the ruleset and store the event (``ValueError`` with a reason if invalid)."""
+    event = _new_event(spec, created_by)
     session.add(event)
     session.commit()
     return event
+
+
+def evaluation_spec(model: Model, body: EvaluationCreate, now: datetime) -> EventCreate:
+    """The unlisted event that evaluates ``model`` as ``body`` asks: the league's default
+    ruleset for the race type on that track and direction (the arena's default obstacles
+    or bots), seeds ``0 .. races-1``, open from ``now`` for :data:`EVALUATION_OPEN`
+    (``ValueError`` for an unknown track)."""
+    direction = body.direction or get_track(body.track).direction
+    track_name = get_track(body.track, direction).display_name
+    name = f"Evaluation: {model.name} on {track_name} ({direction})"
+    return EventCreate(
+        name=name[:100].strip(" "),
+        race_type=body.race_type,
+        track=body.track,
+        direction=direction,
+        laps=body.laps,
+        seeds=list(range(body.races)),
+        opens_at=now,
+        closes_at=now + EVALUATION_OPEN,
+        obstacles=ObstacleConfig() if body.race_type == "object_avoidance" else None,
+        bots=BotConfig() if body.race_type == "head_to_bot" else None,
+    )
+
+
+def create_evaluation(
+    session: Session,
+    model: Model,
+    body: EvaluationCreate,
+    now: datetime,
+    *,
+    max_queued: int | None = None,
+) -> tuple[Event, Entry, list[Job]]:
+    """Store an evaluation of ``model`` (:func:`evaluation_spec`) created by its owner, with
+    the model's entry and its jobs queued as :func:`enter_model` queues them, in one
+    transaction: nothing is stored when it is refused. ``ValueError`` for an unknown
+    track, :class:`QueueFull` past the owner's ``max_queued`` jobs waiting or running.
+    """
+    event = _new_event(evaluation_spec(model, body, now), model.owner_id, kind="evaluation")
+    session.add(event)
+    session.flush()
+    entry, jobs = _enter(session, event, model, max_entries=None, max_queued=max_queued)
+    return event, entry, jobs
 
 
 def add_model(
@@ -151,8 +206,15 @@ def add_model(
 
 
 def is_entered(session: Session, model_id: int) -> bool:
-    """True once a model has been entered in any event (its public fields become visible)."""
-    return session.scalar(select(Entry.id).where(Entry.model_id == model_id).limit(1)) is not None
+    """True once a model has been entered in a league event (its public fields become
+    visible); its owner's evaluations do not count."""
+    query = (
+        select(Entry.id)
+        .join(Event, Entry.event_id == Event.id)
+        .where(Entry.model_id == model_id, Event.kind == "league")
+        .limit(1)
+    )
+    return session.scalar(query) is not None
 
 
 def _check_entry_limits(
@@ -201,10 +263,25 @@ def enter_model(
     """Enter ``model`` in ``event``; queue one evaluation job per seed (none head-to-head).
 
     With ``max_entries`` / ``max_queued`` (the settings ``max_entries_per_racer`` and
-    ``max_queued_jobs_per_racer``) an entry past the owner's caps is refused.
+    ``max_queued_jobs_per_racer``) an entry past the owner's caps is refused. An
+    evaluation event takes no entries (:class:`Conflict`): its one entry comes with it.
     """
+    if event.kind != "league":
+        raise Conflict(f"Event {event.id} is a model's evaluation; it takes no entries.")
     if not event.is_open(now):
         raise Conflict(f"Event {event.id} is not open for entries.")
+    return _enter(session, event, model, max_entries=max_entries, max_queued=max_queued)
+
+
+def _enter(
+    session: Session,
+    event: Event,
+    model: Model,
+    *,
+    max_entries: int | None,
+    max_queued: int | None,
+) -> tuple[Entry, list[Job]]:
+    """Add the entry and its jobs past the owner's caps; commit."""
     if max_entries is not None or max_queued is not None:
         _check_entry_limits(
             session,

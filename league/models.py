@@ -37,6 +37,7 @@ NAMING = {
 }
 
 JOB_STATUSES = ("queued", "running", "done", "failed")
+EVENT_KINDS = ("league", "evaluation")
 RANKING_METRICS = ("total", "best", "average")
 
 
@@ -113,16 +114,20 @@ class Event(Base):
 
     ``final_standings`` is the snapshot the scheduler writes once the event has closed;
     ``rounds_served_at`` is when the queue last leased one of its round jobs (its rounds
-    take their turn like a racer, :mod:`league.jobs.queue`)."""
+    take their turn like a racer, :mod:`league.jobs.queue`). ``kind`` is ``league`` for the
+    events admins create, ``evaluation`` for a racer's unlisted evaluation of one model
+    (``/api/models/{id}/evaluations``): one entry, no other entries, no standings snapshot."""
 
     __tablename__ = "events"
     __table_args__ = (
         CheckConstraint(_in("race_type", RACE_TYPES), name="race_type"),
         CheckConstraint(_in("ranking_metric", RANKING_METRICS), name="ranking_metric"),
         CheckConstraint(_in("direction", ("ccw", "cw")), name="direction"),
+        CheckConstraint(_in("kind", EVENT_KINDS), name="kind"),
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    kind: Mapped[str] = mapped_column(String(16), default="league", server_default="league")
     name: Mapped[str] = mapped_column(String(100))
     race_type: Mapped[str] = mapped_column(String(32))
     track: Mapped[str] = mapped_column(String(64))

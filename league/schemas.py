@@ -200,6 +200,66 @@ class JobOut(_Out):
     updated_at: datetime
 
 
+# ------------------------------------------------------------------ evaluations
+EvaluationRaceType = Literal["time_trial", "object_avoidance", "head_to_bot"]
+EvaluationStatus = Literal["queued", "running", "done", "failed"]
+
+
+class EvaluationCreate(BaseModel):
+    """Evaluate one of your models alone on a track, under the league's default ruleset."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    track: Annotated[str, Field(min_length=1, max_length=64)]
+    direction: Literal["ccw", "cw"] | None = Field(
+        default=None, description="ccw or cw; default: the way the track's file runs"
+    )
+    race_type: EvaluationRaceType = "time_trial"
+    laps: int = Field(default=3, ge=1, le=5)
+    races: int = Field(default=1, ge=1, le=3, description="Races, on seeds 0 .. races-1.")
+
+
+class EvaluationAccepted(BaseModel):
+    """A created evaluation: its unlisted event, the model's entry and the queued jobs."""
+
+    event_id: int
+    entry_id: int
+    jobs: list[JobOut]
+    track: str
+    direction: str
+    race_type: str
+
+
+class EvaluationRace(BaseModel):
+    """One race of an evaluation: the model's laps (times in ms) and incidents."""
+
+    race_id: int
+    status: str
+    laps: int
+    lap_times_ms: list[int]
+    best_lap_ms: int | None
+    total_ms: int | None
+    off_track: int
+    crashes: int
+    resets: int
+
+
+class EvaluationOut(BaseModel):
+    """An evaluation of a model: where its jobs stand (``failed`` once every job has
+    settled and one failed, with that job's ``error``) and the races run so far."""
+
+    event_id: int
+    name: str
+    track: str
+    direction: str
+    race_type: str
+    laps: int
+    created_at: datetime
+    status: EvaluationStatus
+    error: str | None
+    races: list[EvaluationRace]
+
+
 # ------------------------------------------------------------------ leaderboards
 class LeaderboardRow(BaseModel):
     """DeepRacer's leaderboard columns; times in ms; ratings for head-to-head events.

@@ -17,7 +17,17 @@ from league.db import make_engine, make_session_factory
 from league.http.bodylimit import BodyLimitMiddleware, BodyRule
 from league.http.ratelimit import RateLimitMiddleware
 from league.http.read_cache import ReadCache
-from league.http.routes import events, health, jobs, models, racers, races, tracks, training
+from league.http.routes import (
+    evaluations,
+    events,
+    health,
+    jobs,
+    models,
+    racers,
+    races,
+    tracks,
+    training,
+)
 from league.http.security import SecurityHeadersMiddleware
 from league.http.training_feed import TrainingFeed
 from league.http.upload_validation import UploadValidator
@@ -138,7 +148,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # reward checks of new training jobs: sandboxed children, a few at once
     app.state.training_checks = asyncio.Semaphore(settings.validation_concurrency)
     app.state.training_feed = TrainingFeed(app.state.session_factory)  # live events
-    for module in (health, racers, models, events, jobs, races, tracks, training, web_model_data):
+    api = (health, racers, models, events, jobs, races, tracks, training, evaluations)
+    for module in (*api, web_model_data):
         app.include_router(module.router)
     app.include_router(web_routes.router)
     app.include_router(web_docs.router)

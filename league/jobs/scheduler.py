@@ -161,10 +161,14 @@ def due_rounds(session: Session, now: datetime, settings: Settings) -> int:
 
 
 def close_events(session: Session, now: datetime) -> int:
-    """Snapshot the standings of closed events whose jobs have all settled; how many."""
+    """Snapshot the standings of closed league events whose jobs have all settled; how
+    many. Evaluations have no standings to keep: their races are their record."""
     events = session.scalars(
         select(Event).where(
-            Event.closes_at.is_not(None), Event.closes_at <= now, Event.finalized_at.is_(None)
+            Event.kind == "league",
+            Event.closes_at.is_not(None),
+            Event.closes_at <= now,
+            Event.finalized_at.is_(None),
         )
     ).all()
     closed = 0

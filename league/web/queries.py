@@ -52,8 +52,10 @@ def thumbnail(track: str, direction: str) -> str | None:
 
 
 def event_cards(session: Session, limit: int = 100) -> list[EventCard]:
-    """The newest events with their racer counts, thumbnails and time left."""
-    events = list(session.scalars(select(Event).order_by(Event.id.desc()).limit(limit)))
+    """The newest league events (no evaluations) with their racer counts, thumbnails and
+    time left."""
+    query = select(Event).where(Event.kind == "league").order_by(Event.id.desc()).limit(limit)
+    events = list(session.scalars(query))
     counts = dict(
         session.execute(
             select(Entry.event_id, func.count(func.distinct(Entry.racer_id)))

@@ -80,8 +80,14 @@ def list_events(
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0, le=MAX_ID)] = 0,
 ) -> list[EventOut]:
-    """Events, newest first."""
-    query = select(Event).order_by(Event.id.desc()).limit(limit).offset(offset)
+    """League events, newest first (racers' evaluations of their models are unlisted)."""
+    query = (
+        select(Event)
+        .where(Event.kind == "league")
+        .order_by(Event.id.desc())
+        .limit(limit)
+        .offset(offset)
+    )
     return [event_out(e) for e in session.scalars(query)]
 
 
