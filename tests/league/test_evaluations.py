@@ -102,6 +102,10 @@ def test_a_worker_races_an_evaluation_on_another_track_and_its_laps_are_listed(
     with league.client() as anyone:  # the race and its replay work for anyone with the link
         shown = anyone.get(f"/api/races/{race['race_id']}").json()
         trace = anyone.get(f"/api/races/{race['race_id']}/trace")
+        listed = [r["id"] for r in anyone.get("/api/races").json()]
+        by_event = anyone.get("/api/races", params={"event": created["event_id"]}).json()
+    assert race["race_id"] not in listed  # unlisted, as its event is
+    assert [r["id"] for r in by_event] == [race["race_id"]]
     assert (shown["config"]["track"], shown["config"]["direction"]) == (TRACK, DIRECTION)
     assert shown["config"]["laps"] == 1
     assert trace.status_code == 200 and f"entry{created['entry_id']}" in trace.json()["trace"]

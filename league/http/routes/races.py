@@ -19,7 +19,7 @@ from league.http.read_cache import (
     prepared,
     race_version,
 )
-from league.models import Entry, Race, Racer
+from league.models import Entry, Event, Race, Racer
 from league.schemas import MAX_ID, ErrorOut, RaceBrief, RaceCarOut, RaceOut
 from league.store.base import FileStore
 
@@ -65,6 +65,8 @@ def _race_list(
     query = select(Race).options(selectinload(Race.cars)).order_by(Race.id.desc())
     if event is not None:
         query = query.where(Race.event_id == event)
+    else:  # racers' evaluations are unlisted: their races are read by event or id
+        query = query.join(Event, Race.event_id == Event.id).where(Event.kind == "league")
     if before is not None:
         query = query.where(Race.id < before)
     with request.app.state.session_factory() as session:
@@ -92,8 +94,9 @@ async def list_races(
         int, Query(ge=0, le=MAX_OFFSET, description="Races to skip; further back, use before")
     ] = 0,
 ) -> Response:
-    """Races, newest first, with each car's result (ETag; built once per results version).
-    Page with ``before`` (the last id of the previous page): ``offset`` stops at 1000."""
+    """League races, newest first, with each car's result (ETag; built once per results
+    version); evaluations' races only with ``event``. Page with ``before`` (the last id of
+    the previous page): ``offset`` stops at 1000."""
     version: object = league_version(request) if event is None else event_version(request, event)
     key = ("races", event, before, limit, offset, version)
     build = lambda: _race_list(request, event, before, limit, offset)  # noqa: E731
