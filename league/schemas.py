@@ -8,8 +8,16 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    model_validator,
+)
 
+from agents.train_job import MAX_REWARD_SOURCE
 from arena.config import BotConfig, ObstacleConfig, Penalties, RaceType, SeedVariation
 from submissions import Problem
 
@@ -433,3 +441,64 @@ class TrainingQuota(BaseModel):
     minutes_per_month: float
     minutes_used: float
     resets_at: datetime
+
+
+class RescoreCreate(BaseModel):
+    """A logged run to re-score with an edited reward function: one car of a race, or an
+    episode (``null``: the last evaluation) of one of your training jobs."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    reward_source: str = Field(
+        min_length=1,
+        max_length=MAX_REWARD_SOURCE,
+        description="The reward function's Python source (DeepRacer's reward_function(params)).",
+    )
+    race_id: int | None = Field(default=None, ge=1, le=MAX_ID, description="A race (any).")
+    car: str | None = Field(
+        default=None, min_length=1, max_length=64, description="The car of ``race_id``."
+    )
+    training_job_id: int | None = Field(
+        default=None, ge=1, le=MAX_ID, description="One of your training jobs (admins: any)."
+    )
+    episode: int | None = Field(
+        default=None,
+        ge=0,
+        le=MAX_ID,
+        description="A training episode of ``training_job_id``'s simtrace; null: its last "
+        "evaluation (one lap per episode).",
+    )
+
+    @model_validator(mode="after")
+    def _one_run(self) -> RescoreCreate:
+        if (self.race_id is None) == (self.training_job_id is None):
+            raise ValueError("give either race_id and car, or training_job_id")
+        if self.race_id is not None and (self.car is None or self.episode is not None):
+            raise ValueError("a race is re-scored for one car: give car (and no episode)")
+        if self.training_job_id is not None and self.car is not None:
+            raise ValueError("a training job has one car: give episode, not car")
+        return self
+
+
+class RescoreLap(BaseModel):
+    """One lap's (a training episode's) summed rewards."""
+
+    lap: int
+    reward: float
+    original: float | None
+
+
+class RescoreOut(BaseModel):
+    """The re-scored run: per control step, its position, progress, lap (from 0), the new
+    reward and the original one (``null`` when unknown), and their sums per lap and in all."""
+
+    steps: int
+    x: list[float]
+    y: list[float]
+    progress: list[float]
+    lap: list[int]
+    reward: list[float]
+    original: list[float] | None
+    laps: list[RescoreLap]
+    total: float
+    original_total: float | None

@@ -18,6 +18,7 @@ from league.http.bodylimit import BodyLimitMiddleware, BodyRule
 from league.http.ratelimit import RateLimitMiddleware
 from league.http.read_cache import ReadCache
 from league.http.routes import (
+    analysis,
     evaluations,
     events,
     health,
@@ -104,7 +105,7 @@ def _install_middleware(app: FastAPI, settings: Settings) -> None:
             ("POST", app.url_path_for("upload_model")): upload,
             **{
                 ("POST", app.url_path_for(route)): training_job
-                for route in ("create_training_job", "check_training_job")
+                for route in ("create_training_job", "check_training_job", "rescore")
             },
         },
     )
@@ -148,7 +149,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # reward checks of new training jobs: sandboxed children, a few at once
     app.state.training_checks = asyncio.Semaphore(settings.validation_concurrency)
     app.state.training_feed = TrainingFeed(app.state.session_factory)  # live events
-    api = (health, racers, models, events, jobs, races, tracks, training, evaluations)
+    api = (health, racers, models, events, jobs, races, tracks, training, evaluations, analysis)
     for module in (*api, web_model_data):
         app.include_router(module.router)
     app.include_router(web_routes.router)

@@ -50,11 +50,16 @@ def training_refused(settings: Settings) -> str | None:
 
 
 def start_child(
-    args: list[str], workdir: Path, settings: Settings, limits: ConfinementLimits
+    args: list[str],
+    workdir: Path,
+    settings: Settings,
+    limits: ConfinementLimits,
+    module: str = "agents.train_job",
 ) -> subprocess.Popen[bytes]:
-    """``python -m agents.train_job WORKDIR *args`` as a child, sandboxed unless the host
-    cannot and the admin opted in; stdout and stderr merged into one pipe."""
-    argv = [sys.executable, "-m", "agents.train_job", str(workdir), *args]
+    """``python -m MODULE WORKDIR *args`` (by default ``agents.train_job``) as a child,
+    sandboxed unless the host cannot and the admin opted in; stdout and stderr merged into
+    one pipe."""
+    argv = [sys.executable, "-m", module, str(workdir), *args]
     if probe() is None:
         return confined_popen(argv, workdir, limits)
     if not settings.training_unconfined:

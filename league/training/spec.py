@@ -85,7 +85,7 @@ def check_reward(settings: Settings, fields: dict[str, Any], reward_source: str)
             stop_child(child)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
-    verdict = _last_json(out[-MAX_CHECK_OUTPUT:])
+    verdict = last_json(out[-MAX_CHECK_OUTPUT:])
     if verdict.get("ok") is True:
         return
     if "error" in verdict:
@@ -96,7 +96,7 @@ def check_reward(settings: Settings, fields: dict[str, Any], reward_source: str)
     )
 
 
-def _last_json(out: bytes) -> dict[str, Any]:
+def last_json(out: bytes) -> dict[str, Any]:
     for line in reversed(out.decode("utf-8", "replace").splitlines()):
         record = read_record(line)
         if record is not None:
