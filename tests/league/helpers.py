@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -136,3 +139,23 @@ def model_rows(league: League) -> int:
     """How many model rows exist."""
     with league.sessions() as session:
         return session.scalar(select(func.count(Model.id)))
+
+
+def start_daemon(
+    league: League, module: str, args: list[str], log: Path, **env: str
+) -> subprocess.Popen:
+    """Run ``python -m module *args`` (a trainer or a worker) against ``league``'s database
+    and data directory, polling fast, its output in ``log``; ``env`` adds settings."""
+    environment = {
+        **os.environ,
+        "SLIPSTREAM_DATA_DIR": str(league.settings.data_dir),
+        "SLIPSTREAM_DATABASE_URL": league.settings.db_url,
+        "SLIPSTREAM_POLL_SECONDS": "0.2",
+        **env,
+    }
+    return subprocess.Popen(
+        [sys.executable, "-m", module, *args],
+        env=environment,
+        stdout=log.open("wb"),
+        stderr=subprocess.STDOUT,
+    )

@@ -8,7 +8,6 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -22,6 +21,7 @@ from league.training.sandbox import probe
 from league.training.trainer import job_file, race_poses
 from submissions import load_policy
 from tests.league.conftest import Database, League, start_league
+from tests.league.helpers import start_daemon
 
 pytestmark = [
     pytest.mark.slow,
@@ -54,19 +54,13 @@ def league(database: Database, tmp_path_factory: pytest.TempPathFactory) -> Iter
 
 
 def _trainer(league: League, name: str, log: Path) -> subprocess.Popen:
-    env = {
-        **os.environ,
-        "SLIPSTREAM_DATA_DIR": str(league.settings.data_dir),
-        "SLIPSTREAM_DATABASE_URL": league.settings.db_url,
-        "SLIPSTREAM_LEASE_SECONDS": str(LEASE_SECONDS),
-        "SLIPSTREAM_POLL_SECONDS": "0.2",
-        "SLIPSTREAM_TRAINING_WORKERS": "1",
-    }
-    return subprocess.Popen(
-        [sys.executable, "-m", "league.training.trainer", name],
-        env=env,
-        stdout=log.open("wb"),
-        stderr=subprocess.STDOUT,
+    return start_daemon(
+        league,
+        "league.training.trainer",
+        [name],
+        log,
+        SLIPSTREAM_LEASE_SECONDS=str(LEASE_SECONDS),
+        SLIPSTREAM_TRAINING_WORKERS="1",
     )
 
 
