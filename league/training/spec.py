@@ -97,6 +97,7 @@ def check_reward(settings: Settings, fields: dict[str, Any], reward_source: str)
 
 
 def last_json(out: bytes) -> dict[str, Any]:
+    """The last JSON object a sandboxed child printed (its verdict), or ``{}``."""
     for line in reversed(out.decode("utf-8", "replace").splitlines()):
         record = read_record(line)
         if record is not None:
