@@ -42,20 +42,44 @@ class Hyperparameters(BaseModel):
 
     model_config = ConfigDict(extra="ignore", frozen=True)
 
-    batch_size: int = Field(default=64, ge=1, le=4096)
-    beta_entropy: float = Field(default=0.01, ge=0.0, le=1.0)
-    discount_factor: float = Field(default=0.999, ge=0.0, le=1.0)
-    e_greedy_value: float = Field(default=0.05, ge=0.0, le=1.0)
-    epsilon_steps: int = Field(default=10000, ge=0)
-    exploration_type: Literal["categorical", "additive_noise"] = "categorical"
-    loss_type: Literal["huber", "mean squared error"] = "huber"
-    lr: float = Field(default=3e-4, gt=0.0, le=1e-2)
-    num_episodes_between_training: int = Field(default=20, ge=1, le=1000)
-    num_epochs: int = Field(default=10, ge=1, le=100)
-    stack_size: int = Field(default=1, ge=1, le=8)
-    term_cond_avg_score: float = 350.0
-    term_cond_max_episodes: int = Field(default=100000, ge=1)
-    sac_alpha: float = Field(default=0.2, ge=0.0)
+    batch_size: int = Field(
+        default=64, ge=1, le=4096, description="Samples in each gradient step's minibatch."
+    )
+    beta_entropy: float = Field(
+        default=0.01, ge=0.0, le=1.0, description="Entropy bonus: more keeps exploring longer."
+    )
+    discount_factor: float = Field(
+        default=0.999, ge=0.0, le=1.0, description="How much future reward counts (0-1)."
+    )
+    e_greedy_value: float = Field(
+        default=0.05, ge=0.0, le=1.0, description="DeepRacer's epsilon; read, not used by PPO."
+    )
+    epsilon_steps: int = Field(
+        default=10000, ge=0, description="DeepRacer's epsilon decay; read, not used by PPO."
+    )
+    exploration_type: Literal["categorical", "additive_noise"] = Field(
+        default="categorical", description="DeepRacer's exploration kind; PPO samples its policy."
+    )
+    loss_type: Literal["huber", "mean squared error"] = Field(
+        default="huber", description="The critic's loss."
+    )
+    lr: float = Field(default=3e-4, gt=0.0, le=1e-2, description="Learning rate of the updates.")
+    num_episodes_between_training: int = Field(
+        default=20, ge=1, le=1000, description="Episodes collected before each update."
+    )
+    num_epochs: int = Field(
+        default=10, ge=1, le=100, description="Passes over each batch of episodes per update."
+    )
+    stack_size: int = Field(
+        default=1, ge=1, le=8, description="Camera frames the network sees at once."
+    )
+    term_cond_avg_score: float = Field(
+        default=350.0, description="DeepRacer's stop condition on average reward; read, not used."
+    )
+    term_cond_max_episodes: int = Field(
+        default=100000, ge=1, description="DeepRacer's stop condition on episodes; read, not used."
+    )
+    sac_alpha: float = Field(default=0.2, ge=0.0, description="SAC only; read, not used by PPO.")
 
     @classmethod
     def read(cls, path: str | Path) -> tuple[Hyperparameters, list[str]]:

@@ -21,6 +21,7 @@ from league.http.routes import (
     analysis,
     evaluations,
     events,
+    garage,
     health,
     jobs,
     models,
@@ -149,7 +150,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # reward checks of new training jobs: sandboxed children, a few at once
     app.state.training_checks = asyncio.Semaphore(settings.validation_concurrency)
     app.state.training_feed = TrainingFeed(app.state.session_factory)  # live events
-    api = (health, racers, models, events, jobs, races, tracks, training, evaluations, analysis)
+    api = (health, racers, models, events, jobs, races, tracks, training, evaluations)
+    api += (analysis, garage)
     for module in (*api, web_model_data):
         app.include_router(module.router)
     app.include_router(web_routes.router)

@@ -1,4 +1,5 @@
-"""``/api/tracks/{name}``: a track's geometry (centre line and borders) for drawing it."""
+"""``/api/tracks/{name}``: a track's geometry (centre line and borders) for drawing it, and
+its thumbnail."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from pydantic import BaseModel
 
 from league.http.read_cache import Prepared, answer, prepared
 from league.schemas import ErrorOut
+from league.web.queries import thumbnail
 from tracks.catalog import NAME_PATTERN, get_track, track_version
 from tracks.track import TrackError
 
@@ -84,5 +86,42 @@ async def read_track(
         raise _not_found(name, exc) from None
     key = ("track", name, direction, version)
     item = await prepared(request, key, lambda: _geometry(name, direction))
+    assert item is not None
+    return answer(request, item)
+
+
+def _thumbnail(name: str, direction: Literal["ccw", "cw"] | None) -> Prepared:
+    try:
+        track = get_track(name, direction)
+    except TrackError as exc:
+        raise _not_found(name, exc) from None
+    svg = thumbnail(track.name, track.direction)
+    if svg is None:
+        raise HTTPException(404, f"Track {name!r} not found.")
+    return Prepared.of(svg.encode(), "image/svg+xml")
+
+
+@router.get(
+    "/{name}/thumbnail.svg",
+    response_class=Response,
+    responses={
+        200: {"content": {"image/svg+xml": {}}, "description": "The thumbnail"},
+        404: {"model": ErrorOut, "description": "No such track"},
+    },
+)
+async def read_track_thumbnail(
+    name: Annotated[str, Path(pattern=NAME_PATTERN.pattern)],
+    request: Request,
+    direction: Annotated[
+        Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
+    ] = None,
+) -> Response:
+    """The track's small SVG picture, as the event cards show it (ETag)."""
+    try:
+        version = track_version(name)
+    except TrackError as exc:
+        raise _not_found(name, exc) from None
+    key = ("track-thumbnail", name, direction, version)
+    item = await prepared(request, key, lambda: _thumbnail(name, direction))
     assert item is not None
     return answer(request, item)

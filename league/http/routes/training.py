@@ -16,7 +16,7 @@ from typing import Annotated
 from fastapi import APIRouter, Header, HTTPException, Path, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response, StreamingResponse
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
 from agents.recipes import get_recipe
@@ -263,6 +263,22 @@ def stop_training_job(job_id: JobId, racer: CurrentRacer, session: SessionDep) -
     job = _visible(session, racer, job_id)
     request_stop(session, job)
     return job_out(job)
+
+
+@router.delete(
+    "/{job_id}", status_code=204, responses={404: {"model": ErrorOut}, 409: {"model": ErrorOut}}
+)
+def delete_training_job(job_id: JobId, racer: CurrentRacer, session: SessionDep) -> Response:
+    """Delete an ended job and its progress; its model stays one of your models, and its
+    stored run is swept with the other files no row refers to. 409 while it is queued or
+    running (stop it first)."""
+    job = _visible(session, racer, job_id)
+    if job.status in ("queued", "running"):
+        raise HTTPException(409, f"Training job {job_id} is {job.status}; stop it first.")
+    session.execute(delete(TrainingEvent).where(TrainingEvent.job_id == job.id))
+    session.delete(job)
+    session.commit()
+    return Response(status_code=204)
 
 
 @router.patch("/{job_id}", response_model=TrainingJobOut, responses={404: {"model": ErrorOut}})
