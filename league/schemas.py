@@ -418,6 +418,10 @@ class TrainingJobOut(_Out):
     options: dict[str, Any]
     recipe: str | None
     hyperparameters: dict[str, Any] | None
+    reward_source: str
+    track: str = Field(description="The track it trains on (its options over its recipe's)")
+    direction: Literal["ccw", "cw"] | None = Field(description="None: the track file's")
+    race_type: str
     minutes: float
     clone_of: int | None
     resume_of: int | None

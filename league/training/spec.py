@@ -15,6 +15,7 @@ from pydantic import ValidationError
 
 from agents.hyperparameters import Hyperparameters
 from agents.recipes import get_recipe
+from agents.settings import TrainSettings
 from agents.train_job import JOB_FILE, REWARD_FILE, job_settings, read_record
 from league.settings import Settings
 from league.training.launch import CHECK_CPU_SECONDS, limits_of, start_child, stop_child
@@ -25,6 +26,19 @@ MAX_CHECK_OUTPUT = 64 * 1024
 
 class JobRefused(ValueError):
     """The request cannot train: the message says why (422)."""
+
+
+def trains_on(spec: dict[str, Any]) -> dict[str, Any]:
+    """The track, direction (None: the track file's) and race type a job's spec trains on:
+    its options over its recipe's over ``slipstream train``'s defaults."""
+    recipe = spec.get("recipe")
+    options = {**(get_recipe(recipe).options if recipe else {}), **spec.get("options", {})}
+    fields = TrainSettings.model_fields
+    return {
+        "track": options.get("track", fields["track"].default),
+        "direction": options.get("direction"),
+        "race_type": options.get("race_type", fields["race_type"].default),
+    }
 
 
 def job_fields(

@@ -42,7 +42,13 @@ from league.training.queue import (
     request_stop,
 )
 from league.training.sandbox import SandboxUnavailable
-from league.training.spec import JobRefused, check_reward, check_settings, job_fields
+from league.training.spec import (
+    JobRefused,
+    check_reward,
+    check_settings,
+    job_fields,
+    trains_on,
+)
 
 router = APIRouter(prefix="/api/training-jobs", tags=["training"])
 JobId = Annotated[int, Path(ge=1, le=MAX_ID)]
@@ -61,6 +67,8 @@ def job_out(job: TrainingJob) -> TrainingJobOut:
         options=spec.get("options", {}),
         recipe=spec.get("recipe"),
         hyperparameters=spec.get("hyperparameters"),
+        reward_source=job.reward_source,
+        **trains_on(spec),
         minutes=job.minutes,
         clone_of=None if spec.get("resume") else job.clone_of_id,
         resume_of=job.clone_of_id if spec.get("resume") else None,
