@@ -1,0 +1,85 @@
+// The training reward graph, as DeepRacer's console drew it: average reward (left axis),
+// training and evaluation completion (right axis, %), and optionally a marker on the
+// iteration whose checkpoint is the model. Used by the model page and the training page.
+// `metrics` is {columns, values: {column: [number or null]}} (GET /api/models/{id}/metrics).
+"use strict";
+
+const RewardGraph = {
+  series(metrics, column) {
+    const xs = metrics.values.iteration || metrics.values[metrics.columns[0]].map((_, i) => i);
+    const ys = metrics.values[column] || [];
+    return xs.map((x, i) => [x, ys[i]]).filter(([x, y]) => x !== null && y !== null && y !== undefined);
+  },
+
+  // Draw on `canvas`; false when there is nothing to draw. `options.marker`: an iteration
+  // to mark with a dashed line and `options.markerLabel`.
+  draw(canvas, metrics, options = {}) {
+    canvas.hidden = false;
+    const ctx = canvas.getContext("2d");
+    const W = canvas.width;
+    const H = canvas.height;
+    const pad = { l: 60, r: 60, t: 20, b: 40 };
+    ctx.fillStyle = "#fff";
+    ctx.fillRect(0, 0, W, H);
+    const reward = RewardGraph.series(metrics, "mean_reward");
+    const lines = [
+      { data: reward, color: "#1e9e4a", label: "average reward (training)", axis: "left" },
+      { data: RewardGraph.series(metrics, "mean_progress"), color: "#2f6fff", label: "average % completion (training)", axis: "right" },
+      { data: RewardGraph.series(metrics, "eval_progress"), color: "#e0342b", label: "average % completion (evaluation)", axis: "right", dots: true },
+    ];
+    const all = lines.flatMap((l) => l.data);
+    if (!all.length) return false;
+    const x0 = Math.min(...all.map((p) => p[0]));
+    const x1 = Math.max(...all.map((p) => p[0])) || 1;
+    const r0 = Math.min(0, ...reward.map((p) => p[1]));
+    const r1 = Math.max(1, ...reward.map((p) => p[1]));
+    const sx = (x) => pad.l + ((x - x0) / (x1 - x0 || 1)) * (W - pad.l - pad.r);
+    const sy = {
+      left: (y) => H - pad.b - ((y - r0) / (r1 - r0)) * (H - pad.t - pad.b),
+      right: (y) => H - pad.b - (y / 100) * (H - pad.t - pad.b),
+    };
+    ctx.strokeStyle = "#ccc";
+    ctx.fillStyle = "#444";
+    ctx.font = "12px system-ui, sans-serif";
+    for (let k = 0; k <= 4; k++) {
+      const y = pad.t + (k / 4) * (H - pad.t - pad.b);
+      ctx.beginPath();
+      ctx.moveTo(pad.l, y);
+      ctx.lineTo(W - pad.r, y);
+      ctx.stroke();
+      ctx.textAlign = "right";
+      ctx.fillText((r1 - (k / 4) * (r1 - r0)).toFixed(1), pad.l - 6, y + 4);
+      ctx.textAlign = "left";
+      ctx.fillText(`${100 - k * 25}%`, W - pad.r + 6, y + 4);
+    }
+    ctx.textAlign = "center";
+    ctx.fillText("iteration", W / 2, H - 8);
+    ctx.fillText(String(x0), pad.l, H - pad.b + 16);
+    ctx.fillText(String(x1), W - pad.r, H - pad.b + 16);
+    if (options.marker !== null && options.marker !== undefined) {
+      ctx.save();
+      ctx.strokeStyle = "#7a3cff";
+      ctx.fillStyle = "#7a3cff";
+      ctx.setLineDash([5, 4]);
+      ctx.beginPath();
+      ctx.moveTo(sx(options.marker), pad.t);
+      ctx.lineTo(sx(options.marker), H - pad.b);
+      ctx.stroke();
+      ctx.textAlign = "center";
+      ctx.fillText(options.markerLabel || "model", sx(options.marker), H - pad.b - 6);
+      ctx.restore();
+    }
+    lines.forEach((line, n) => {
+      ctx.strokeStyle = ctx.fillStyle = line.color;
+      ctx.lineWidth = 2;
+      ctx.beginPath();
+      line.data.forEach(([x, y], i) => (i ? ctx.lineTo(sx(x), sy[line.axis](y)) : ctx.moveTo(sx(x), sy[line.axis](y))));
+      ctx.stroke();
+      if (line.dots) line.data.forEach(([x, y]) => ctx.fillRect(sx(x) - 3, sy[line.axis](y) - 3, 6, 6));
+      ctx.textAlign = "left";
+      ctx.fillText(line.label, pad.l + 10, pad.t + 14 + 16 * n);
+    });
+    canvas.dataset.points = String(reward.length);
+    return true;
+  },
+};

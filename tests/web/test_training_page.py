@@ -1,0 +1,104 @@
+"""The training page in real Chromium: the reward graph and the live view from a job's
+events (as a trainer writes them; no training here), the warning when evaluation laps get
+slower while the reward rises, and a running job's graph growing as events arrive."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from league.models import TrainingEvent, TrainingJob, utcnow
+from tests.league.conftest import League
+from tests.web.test_browser import sign_in
+from tests.web.test_csp import violations, watch_csp
+
+SPEC = {"options": {"track": "slipstream_speedway"}, "recipe": None, "hyperparameters": None}
+
+
+def _iteration(i: int, reward: float, lap: float | None = None) -> dict[str, Any]:
+    record: dict[str, Any] = {
+        "iteration": i, "elapsed_s": 6.0 * i, "steps": 640, "episodes": 4,
+        "mean_reward": reward, "mean_progress": min(100.0, 10.0 * i), "lap_completion": 0.5,
+        "value_loss": 0.1, "surrogate_loss": 0.0, "entropy": 1.0, "eval": None,
+    }  # fmt: skip
+    if lap is not None:
+        record["eval"] = {
+            "laps": 3, "progress": 100.0, "best_lap": lap, "total_time": 3 * lap,
+            "off_track": 0, "crashes": 0, "resets": 0, "status": "finished",
+        }  # fmt: skip
+    return record
+
+
+def _job(league: League, status: str, events: list[tuple[str, dict]]) -> int:
+    with league.sessions() as session:
+        job = TrainingJob(
+            owner_id=league.ids["alice"], name=f"page-{status}", status=status, spec=SPEC,
+            reward_source="def reward_function(params):\n    return 1.0\n", minutes=5,
+            started_at=utcnow(), finished_at=utcnow() if status == "done" else None,
+        )  # fmt: skip
+        session.add(job)
+        session.flush()
+        session.add_all(TrainingEvent(job_id=job.id, kind=k, data=d) for k, d in events)
+        session.commit()
+        return job.id
+
+
+def _add(league: League, job_id: int, kind: str, data: dict) -> None:
+    with league.sessions() as session:
+        session.add(TrainingEvent(job_id=job_id, kind=kind, data=data))
+        session.commit()
+
+
+def test_a_finished_job_draws_its_graph_view_evaluations_and_the_lap_warning(
+    page, league: League
+) -> None:
+    # The measured case: the best lap early, slower ever since, the reward still climbing.
+    laps = {3: 7.2, 6: 8.4, 9: 9.9, 12: 11.8}
+    events = [("iteration", _iteration(i, 10.0 * i, laps.get(i))) for i in range(1, 13)]
+    poses = {"iteration": 12, "episode": "3", "x": [0.0, 0.5, 1.0], "y": [0.0, 0.0, 0.1]}
+    events.append(("poses", {**poses, "yaw": [0.0, 0.0, 5.0]}))
+    events.append(("status", {"status": "done", "error": None}))
+    job_id = _job(league, "done", events)
+    console = watch_csp(page)
+    sign_in(page, league, "alice")
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#reward-graph[data-points='12']")
+    page.wait_for_selector("#live-view[data-poses='3']")
+    assert page.get_attribute("#status", "data-status") == "done"
+    rows = page.eval_on_selector_all(
+        "#eval-laps tbody tr", "rs => rs.map(r => r.cells[3].innerText)"
+    )
+    assert rows == ["0:07.200", "0:08.400", "0:09.900", "0:11.800"]
+    warning = page.inner_text("#warning")
+    assert "slower for 3 evaluations" in warning and "7.20 s" in warning and "11.80 s" in warning
+    assert violations(page, console) == []
+
+
+def test_no_warning_while_laps_improve(page, league: League) -> None:
+    laps = {3: 11.0, 6: 10.0, 9: 9.0, 12: 8.0}
+    job_id = _job(
+        league, "done", [("iteration", _iteration(i, 5.0 * i, laps.get(i))) for i in range(1, 13)]
+    )
+    sign_in(page, league, "alice")
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#reward-graph[data-points='12']")
+    assert page.is_hidden("#warning")
+
+
+def test_a_running_jobs_graph_grows_as_its_trainer_reports(page, league: League) -> None:
+    job_id = _job(league, "running", [("iteration", _iteration(i, float(i))) for i in range(1, 4)])
+    sign_in(page, league, "alice")
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#reward-graph[data-points='3']")
+    _add(league, job_id, "iteration", _iteration(4, 4.0))
+    _add(league, job_id, "log", {"line": "iteration 4 done"})
+    page.wait_for_selector("#reward-graph[data-points='4']")
+    page.wait_for_function(
+        "() => document.getElementById('log').textContent.includes('iteration 4')"
+    )
+    with league.sessions() as session:
+        job = session.get_one(TrainingJob, job_id)
+        job.status, job.finished_at = "stopped", utcnow()
+        session.add(TrainingEvent(job_id=job_id, kind="status", data={"status": "stopped"}))
+        session.commit()
+    page.wait_for_selector("#status[data-status=stopped]")
+    assert page.is_hidden("#stop")
