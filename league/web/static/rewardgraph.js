@@ -82,4 +82,54 @@ const RewardGraph = {
     canvas.dataset.points = String(reward.length);
     return true;
   },
+
+  COLORS: ["#1f5fd6", "#e0342b", "#1e9e4a", "#b86e00", "#7a3cff", "#008b8b", "#c2185b", "#5b6470"],
+
+  // Several runs' series on one axis: lines [{data: [[x, y]], label}], each in its own
+  // colour with a legend; false when there is nothing to draw.
+  plot(canvas, lines, xLabel = "iteration") {
+    const ctx = canvas.getContext("2d");
+    const W = canvas.width;
+    const H = canvas.height;
+    const pad = { l: 60, r: 20, t: 20, b: 40 };
+    ctx.fillStyle = "#fff";
+    ctx.fillRect(0, 0, W, H);
+    const all = lines.flatMap((l) => l.data);
+    canvas.dataset.lines = String(lines.filter((l) => l.data.length).length);
+    if (!all.length) return false;
+    const x0 = Math.min(...all.map((p) => p[0]));
+    const x1 = Math.max(...all.map((p) => p[0]));
+    const y0 = Math.min(...all.map((p) => p[1]));
+    const y1 = Math.max(...all.map((p) => p[1]));
+    const sx = (x) => pad.l + ((x - x0) / (x1 - x0 || 1)) * (W - pad.l - pad.r);
+    const sy = (y) => H - pad.b - ((y - y0) / (y1 - y0 || 1)) * (H - pad.t - pad.b);
+    ctx.strokeStyle = "#ccc";
+    ctx.fillStyle = "#444";
+    ctx.font = "12px system-ui, sans-serif";
+    for (let k = 0; k <= 4; k++) {
+      const y = pad.t + (k / 4) * (H - pad.t - pad.b);
+      ctx.beginPath();
+      ctx.moveTo(pad.l, y);
+      ctx.lineTo(W - pad.r, y);
+      ctx.stroke();
+      ctx.textAlign = "right";
+      ctx.fillText((y1 - (k / 4) * (y1 - y0)).toFixed(1), pad.l - 6, y + 4);
+    }
+    ctx.textAlign = "center";
+    ctx.fillText(xLabel, W / 2, H - 8);
+    ctx.fillText(String(x0), pad.l, H - pad.b + 16);
+    ctx.fillText(String(x1), W - pad.r, H - pad.b + 16);
+    lines.forEach((line, n) => {
+      const color = RewardGraph.COLORS[n % RewardGraph.COLORS.length];
+      ctx.strokeStyle = ctx.fillStyle = color;
+      ctx.lineWidth = 2;
+      ctx.beginPath();
+      line.data.forEach(([x, y], i) => (i ? ctx.lineTo(sx(x), sy(y)) : ctx.moveTo(sx(x), sy(y))));
+      ctx.stroke();
+      line.data.forEach(([x, y]) => ctx.fillRect(sx(x) - 2, sy(y) - 2, 4, 4));
+      ctx.textAlign = "left";
+      ctx.fillText(line.label, pad.l + 10, pad.t + 14 + 16 * n);
+    });
+    return true;
+  },
 };
