@@ -54,6 +54,9 @@ def test_pages_work_without_csp_violations(page, league: League, site: Site) -> 
         f"/races/{site.races['h2h1']}": ".swatch",
         f"/models/{site.models['alice']}": "main h1",
         "/upload": "form",
+        "/garage": "main[data-loaded=true]",
+        "/garage/new": ".CodeMirror",
+        "/garage/bench": ".CodeMirror",
     }
     for path, selector in checks.items():
         page.goto(path)

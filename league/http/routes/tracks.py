@@ -3,6 +3,7 @@ its thumbnail."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated, Literal
 
 import numpy as np
@@ -61,6 +62,23 @@ def _geometry(name: str, direction: Literal["ccw", "cw"] | None) -> Prepared:
     return Prepared.of(geometry.model_dump_json().encode(), "application/json")
 
 
+async def _per_version(
+    request: Request,
+    name: str,
+    direction: Literal["ccw", "cw"] | None,
+    build: Callable[[str, Literal["ccw", "cw"] | None], Prepared],
+) -> Response:
+    """``build(name, direction)``'s answer, built once per version of the track's file."""
+    try:
+        version = track_version(name)
+    except TrackError as exc:
+        raise _not_found(name, exc) from None
+    key = (build.__name__, name, direction, version)
+    item = await prepared(request, key, lambda: build(name, direction))
+    assert item is not None
+    return answer(request, item)
+
+
 @router.get(
     "/{name}",
     response_model=TrackGeometry,
@@ -80,14 +98,7 @@ async def read_track(
     is read and checked in a worker thread, never on the event loop); the 404's text names
     no server path and lists the built-in tracks only.
     """
-    try:
-        version = track_version(name)
-    except TrackError as exc:
-        raise _not_found(name, exc) from None
-    key = ("track", name, direction, version)
-    item = await prepared(request, key, lambda: _geometry(name, direction))
-    assert item is not None
-    return answer(request, item)
+    return await _per_version(request, name, direction, _geometry)
 
 
 def _thumbnail(name: str, direction: Literal["ccw", "cw"] | None) -> Prepared:
@@ -117,11 +128,4 @@ async def read_track_thumbnail(
     ] = None,
 ) -> Response:
     """The track's small SVG picture, as the event cards show it (ETag)."""
-    try:
-        version = track_version(name)
-    except TrackError as exc:
-        raise _not_found(name, exc) from None
-    key = ("track-thumbnail", name, direction, version)
-    item = await prepared(request, key, lambda: _thumbnail(name, direction))
-    assert item is not None
-    return answer(request, item)
+    return await _per_version(request, name, direction, _thumbnail)

@@ -3,6 +3,8 @@
 "use strict";
 
 const Bench = {
+  MAX_STEP_M: 1.0, // a longer jump between two steps is a respawn or a car parked after its race
+
   // A value's colour on the heat line: blue (lowest) through green to red (highest).
   color(value, low, high) {
     const t = high > low ? (value - low) / (high - low) : 0.5;
@@ -68,7 +70,8 @@ function drawHeat(canvas, geometry, result, values, legend) {
   ctx.lineWidth = 4;
   ctx.lineCap = "round";
   for (let i = 1; i < result.x.length; i++) {
-    if (result.lap[i] !== result.lap[i - 1]) continue;
+    const jump = Math.hypot(result.x[i] - result.x[i - 1], result.y[i] - result.y[i - 1]);
+    if (result.lap[i] !== result.lap[i - 1] || jump > Bench.MAX_STEP_M) continue; // a reset or a parked car
     const [ax, ay] = view.toScreen(result.x[i - 1], result.y[i - 1]);
     const [bx, by] = view.toScreen(result.x[i], result.y[i]);
     ctx.strokeStyle = Bench.color(values[i], low, high);

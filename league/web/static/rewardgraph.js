@@ -5,6 +5,31 @@
 "use strict";
 
 const RewardGraph = {
+  // Five grid lines labelled from y1 (top) to y0 on the left (and by right(k), k = 0..4,
+  // on the right), and the x axis from x0 to x1 with its label.
+  axes(ctx, W, H, pad, [y0, y1], [x0, x1], xLabel, right = null) {
+    ctx.strokeStyle = "#ccc";
+    ctx.fillStyle = "#444";
+    ctx.font = "12px system-ui, sans-serif";
+    for (let k = 0; k <= 4; k++) {
+      const y = pad.t + (k / 4) * (H - pad.t - pad.b);
+      ctx.beginPath();
+      ctx.moveTo(pad.l, y);
+      ctx.lineTo(W - pad.r, y);
+      ctx.stroke();
+      ctx.textAlign = "right";
+      ctx.fillText((y1 - (k / 4) * (y1 - y0)).toFixed(1), pad.l - 6, y + 4);
+      if (right) {
+        ctx.textAlign = "left";
+        ctx.fillText(right(k), W - pad.r + 6, y + 4);
+      }
+    }
+    ctx.textAlign = "center";
+    ctx.fillText(xLabel, W / 2, H - 8);
+    ctx.fillText(String(x0), pad.l, H - pad.b + 16);
+    ctx.fillText(String(x1), W - pad.r, H - pad.b + 16);
+  },
+
   series(metrics, column) {
     const xs = metrics.values.iteration || metrics.values[metrics.columns[0]].map((_, i) => i);
     const ys = metrics.values[column] || [];
@@ -38,24 +63,7 @@ const RewardGraph = {
       left: (y) => H - pad.b - ((y - r0) / (r1 - r0)) * (H - pad.t - pad.b),
       right: (y) => H - pad.b - (y / 100) * (H - pad.t - pad.b),
     };
-    ctx.strokeStyle = "#ccc";
-    ctx.fillStyle = "#444";
-    ctx.font = "12px system-ui, sans-serif";
-    for (let k = 0; k <= 4; k++) {
-      const y = pad.t + (k / 4) * (H - pad.t - pad.b);
-      ctx.beginPath();
-      ctx.moveTo(pad.l, y);
-      ctx.lineTo(W - pad.r, y);
-      ctx.stroke();
-      ctx.textAlign = "right";
-      ctx.fillText((r1 - (k / 4) * (r1 - r0)).toFixed(1), pad.l - 6, y + 4);
-      ctx.textAlign = "left";
-      ctx.fillText(`${100 - k * 25}%`, W - pad.r + 6, y + 4);
-    }
-    ctx.textAlign = "center";
-    ctx.fillText("iteration", W / 2, H - 8);
-    ctx.fillText(String(x0), pad.l, H - pad.b + 16);
-    ctx.fillText(String(x1), W - pad.r, H - pad.b + 16);
+    RewardGraph.axes(ctx, W, H, pad, [r0, r1], [x0, x1], "iteration", (k) => `${100 - k * 25}%`);
     if (options.marker !== null && options.marker !== undefined) {
       ctx.save();
       ctx.strokeStyle = "#7a3cff";
@@ -103,22 +111,7 @@ const RewardGraph = {
     const y1 = Math.max(...all.map((p) => p[1]));
     const sx = (x) => pad.l + ((x - x0) / (x1 - x0 || 1)) * (W - pad.l - pad.r);
     const sy = (y) => H - pad.b - ((y - y0) / (y1 - y0 || 1)) * (H - pad.t - pad.b);
-    ctx.strokeStyle = "#ccc";
-    ctx.fillStyle = "#444";
-    ctx.font = "12px system-ui, sans-serif";
-    for (let k = 0; k <= 4; k++) {
-      const y = pad.t + (k / 4) * (H - pad.t - pad.b);
-      ctx.beginPath();
-      ctx.moveTo(pad.l, y);
-      ctx.lineTo(W - pad.r, y);
-      ctx.stroke();
-      ctx.textAlign = "right";
-      ctx.fillText((y1 - (k / 4) * (y1 - y0)).toFixed(1), pad.l - 6, y + 4);
-    }
-    ctx.textAlign = "center";
-    ctx.fillText(xLabel, W / 2, H - 8);
-    ctx.fillText(String(x0), pad.l, H - pad.b + 16);
-    ctx.fillText(String(x1), W - pad.r, H - pad.b + 16);
+    RewardGraph.axes(ctx, W, H, pad, [y0, y1], [x0, x1], xLabel);
     lines.forEach((line, n) => {
       const color = RewardGraph.COLORS[n % RewardGraph.COLORS.length];
       ctx.strokeStyle = ctx.fillStyle = color;
