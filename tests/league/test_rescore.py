@@ -23,7 +23,7 @@ from league.models import Event, TrainingJob
 from league.training import rescore
 from league.training.trainer import zip_folder
 from submissions import pack
-from tests.league.conftest import CREATED_AT, League, policy_onnx
+from tests.league.conftest import CREATED_AT, Database, League, policy_onnx, start_league
 from tests.league.helpers import create_event, enter, record_as_worker
 
 PROGRESS = "def reward_function(params):\n    return params['progress']\n"
@@ -110,6 +110,14 @@ def _finished_job(league: League, folder: Path) -> tuple[int, list[dict], list[d
         session.add(job)
         session.commit()
         return job.id, _rows(evaluation), _rows(training)
+
+
+@pytest.fixture(scope="module")
+def league(tmp_path_factory: pytest.TempPathFactory) -> Iterator[League]:
+    """SQLite only: a re-score reads one row; what these tests exercise is the sandbox."""
+    folder = tmp_path_factory.mktemp("rescore-league")
+    database = Database(f"sqlite:///{folder / 'league.db'}", "sqlite")
+    yield from start_league(database, folder / "data")
 
 
 @pytest.fixture(scope="module")

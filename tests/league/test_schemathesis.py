@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from tests.league.conftest import League
 from tests.league.helpers import car, create_event, enter, record, upload
 
-EXAMPLES = 25
+EXAMPLES = 15
 
 
 def _fuzz(league: League, operation, headers: dict[str, str], failures: list[str]) -> int:
