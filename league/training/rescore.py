@@ -163,9 +163,9 @@ def _simtrace_step(row: dict[str, str], lap: int) -> tuple[dict[str, Any], float
     return step, _number(row.get("reward"), "reward")
 
 
-def _run_settings(archive: zipfile.ZipFile, spec_options: dict[str, Any]) -> dict[str, Any]:
-    """Track, direction and race type of a run: its ``training_settings.json``, else the
-    job's options."""
+def _run_settings(archive: zipfile.ZipFile, trains_on: dict[str, Any]) -> dict[str, Any]:
+    """Track, direction and race type of a run: its ``training_settings.json``, else what
+    the job's spec trains on (:func:`league.training.spec.trains_on`)."""
     found: dict[str, Any] = {}
     try:
         info = archive.getinfo(SETTINGS_MEMBER)
@@ -175,17 +175,10 @@ def _run_settings(archive: zipfile.ZipFile, spec_options: dict[str, Any]) -> dic
         pass
     if not isinstance(found, dict):
         found = {}
-    return {
-        key: found.get(key, spec_options.get(key, default))
-        for key, default in (
-            ("track", "beginner_loop"),
-            ("direction", None),
-            ("race_type", "time_trial"),
-        )
-    }
+    return {key: found.get(key, trains_on[key]) for key in ("track", "direction", "race_type")}
 
 
-def run_log(data: bytes, spec_options: dict[str, Any], episode: int | None) -> Log:
+def run_log(data: bytes, trains_on: dict[str, Any], episode: int | None) -> Log:
     """The steps of a training run's zip: its last evaluation (``episode`` None; lap ``k``
     is simtrace episode ``k``) or training episode ``episode``; ``logged`` holds the
     simtrace's reward column."""
@@ -194,7 +187,7 @@ def run_log(data: bytes, spec_options: dict[str, Any], episode: int | None) -> L
     except zipfile.BadZipFile:
         raise RescoreRefused("the job's stored run is not a readable zip") from None
     with archive:
-        found = _run_settings(archive, spec_options)
+        found = _run_settings(archive, trains_on)
         log = Log(str(found["track"]), found["direction"], str(found["race_type"]), "agent")
         names = archive.namelist()
         budget = [MAX_SCAN_BYTES]

@@ -60,5 +60,6 @@ def test_params_rebuilt_from_an_evaluation_simtrace_are_those_the_race_gave(
     with zipfile.ZipFile(data, "w") as archive:
         for path in tmp_path.rglob("*.csv"):
             archive.write(path, path.relative_to(tmp_path).as_posix())
-    log = run_log(data.getvalue(), {"track": "beginner_loop", "direction": "cw"}, None)
+    trains_on = {"track": "beginner_loop", "direction": "cw", "race_type": "time_trial"}
+    log = run_log(data.getvalue(), trains_on, None)
     _assert_same(all_params(log.document()), seen)  # a part lap: steps and progress alike

@@ -27,6 +27,7 @@ from league.training.rescore import (
     score_in_sandbox,
 )
 from league.training.sandbox import SandboxUnavailable
+from league.training.spec import trains_on
 from submissions.format import REWARD_MEMBER, Limits
 
 router = APIRouter(prefix="/api", tags=["analysis"])
@@ -84,7 +85,7 @@ def _job(
         data = storage.read("runs", job.run_sha256)
     except FileNotFoundError:
         raise HTTPException(404, f"The run of training job {job_id} is missing.") from None
-    return run_log(data, job.spec.get("options", {}), episode)
+    return run_log(data, trains_on(job.spec), episode)
 
 
 def _log(
