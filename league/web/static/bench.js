@@ -20,22 +20,10 @@ const Bench = {
     }
     return { reward_source: reward, race_id: Number(source.race), car: source.car };
   },
-
-  // The line an error message names ("... line 3 ..."), or null.
-  lineOf(message) {
-    const match = /\bline (\d+)/.exec(message || "");
-    return match ? Number(match[1]) : null;
-  },
 };
 
 const bench = { editor: null, geometry: {} };
 const field = (id) => document.getElementById(id);
-
-function benchSay(id, text, kind) {
-  const box = field(id);
-  box.className = "result" + (kind ? " " + kind : "");
-  box.textContent = text;
-}
 
 async function geometryOf(track, direction) {
   const key = `${track}/${direction || ""}`;
@@ -95,24 +83,23 @@ function source() {
 
 async function rescore() {
   const chosen = source();
-  if (!chosen.job && !(chosen.race && chosen.car)) return benchSay("rescore-result", "Choose a race and its car, or a training job.", "error");
+  if (!chosen.job && !(chosen.race && chosen.car)) return Slip.say("rescore-result", "Choose a race and its car, or a training job.", "error");
   bench.editor.clearMarks();
-  benchSay("rescore-result", "Re-scoring in the sandbox…", "");
+  Slip.say("rescore-result", "Re-scoring in the sandbox…", "");
   const answer = await Slip.api("/api/rescore", {
     method: "POST",
     headers: { "Content-Type": "application/json" },
     body: JSON.stringify(Bench.body(chosen, bench.editor.getValue())),
   });
   if (!answer.ok) {
-    const detail = answer.body?.detail;
-    const text = Array.isArray(detail) ? detail.map((d) => d.msg).join("; ") : detail || `Refused (HTTP ${answer.status}).`;
-    const line = Bench.lineOf(text);
+    const text = Slip.errorText(answer);
+    const line = Slip.lineOf(text);
     if (line) bench.editor.markLine(line, text);
-    return benchSay("rescore-result", text, "error");
+    return Slip.say("rescore-result", text, "error");
   }
   const result = answer.body;
   const original = result.original_total === null ? "" : `, original ${result.original_total.toFixed(2)}`;
-  benchSay("rescore-result", `${result.steps} steps: total ${result.total.toFixed(2)}${original}.`, "ok");
+  Slip.say("rescore-result", `${result.steps} steps: total ${result.total.toFixed(2)}${original}.`, "ok");
   const where = await sourceTrack(chosen);
   const geometry = where && (await geometryOf(where.track, where.direction));
   if (geometry) {
@@ -176,7 +163,7 @@ function startBench() {
   bench.editor.setValue("def reward_function(params):\n    return float(params['progress'])\n");
   field("rescore").addEventListener("click", rescore);
   field("compare").addEventListener("click", compare);
-  if (!Slip.token()) benchSay("bench-note", "Paste your API token (top right) to re-score and compare your runs.", "");
+  if (!Slip.token()) Slip.say("bench-note", "Paste your API token (top right) to re-score and compare your runs.", "");
   else loadJobs();
 }
 

@@ -58,6 +58,30 @@ const Slip = {
     return m + "m " + String(s % 60).padStart(2, "0") + "s";
   },
 
+  // Show `text` (and `children`) in the status box `id`, styled by `kind` ("ok", "error" or
+  // ""); an empty message hides the box.
+  say(id, text, kind, ...children) {
+    const box = document.getElementById(id);
+    box.className = "result" + (kind ? " " + kind : "");
+    box.replaceChildren(text, ...children);
+    box.hidden = !text && !children.length;
+  },
+
+  // An API error's text: FastAPI's detail string, or its validation list.
+  errorText(answer) {
+    const detail = answer.body && answer.body.detail;
+    if (Array.isArray(detail)) return detail.map((d) => `${(d.loc || []).slice(1).join(".")}: ${d.msg}`).join("; ");
+    return detail || `The request failed (HTTP ${answer.status}).`;
+  },
+
+  // The line an error message names ("... at line 3"), or null.
+  lineOf(message) {
+    const match = /\bline (\d+)/.exec(message || "");
+    return match ? Number(match[1]) : null;
+  },
+
+  TRAINING_ENDED: ["done", "stopped", "failed"], // a training job's statuses once it has ended
+
   date(iso) {
     return iso ? new Date(iso).toISOString().slice(0, 16).replace("T", " ") + " UTC" : "—";
   },

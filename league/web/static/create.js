@@ -32,19 +32,6 @@ const Create = {
     return recipe && (!recipe.needs_parent || cloning) ? recipe : null;
   },
 
-  // The line an error message names ("... at line 3"), or null.
-  lineOf(message) {
-    const match = /\bline (\d+)/.exec(message || "");
-    return match ? Number(match[1]) : null;
-  },
-
-  // An API error's text: FastAPI's detail string, or its validation list.
-  errorText(answer) {
-    const detail = answer.body && answer.body.detail;
-    if (Array.isArray(detail)) return detail.map((d) => `${(d.loc || []).slice(1).join(".")}: ${d.msg}`).join("; ");
-    return detail || `The request failed (HTTP ${answer.status}).`;
-  },
-
   // Which sensors may not be added to `selected` (no allowed combination holds them all),
   // and whether `selected` is itself an allowed combination.
   sensorState(selected, combinations) {
@@ -74,12 +61,6 @@ let catalogue = null;
 let editor = null;
 let actions = null;
 const cloneOf = Number(new URLSearchParams(window.location.search).get("clone")) || null;
-
-function say(id, text, kind) {
-  const box = $(id);
-  box.className = "result" + (kind ? " " + kind : "");
-  box.textContent = text;
-}
 
 function trackCard(track) {
   const id = `track-${track.name}`;
@@ -184,19 +165,19 @@ function formState() {
 
 // Show a refusal; mark the reward's line when the message names one.
 function refuse(answer) {
-  const text = Create.errorText(answer);
-  say("validate-result", text, "error");
-  const line = Create.lineOf(text);
+  const text = Slip.errorText(answer);
+  Slip.say("validate-result", text, "error");
+  const line = Slip.lineOf(text);
   if (line !== null && /reward/.test(text)) editor.markLine(line, text);
 }
 
 async function send(path) {
   editor.clearMarks();
   if (!Slip.token()) {
-    say("validate-result", "Paste your API token (top right) first.", "error");
+    Slip.say("validate-result", "Paste your API token (top right) first.", "error");
     return null;
   }
-  say("validate-result", path.endsWith("/check") ? "Validating…" : "Queuing…", "");
+  Slip.say("validate-result", path.endsWith("/check") ? "Validating…" : "Queuing…", "");
   const answer = await Slip.api(path, {
     method: "POST",
     headers: { "Content-Type": "application/json" },
@@ -207,7 +188,7 @@ async function send(path) {
 }
 
 async function validate() {
-  if (await send("/api/training-jobs/check")) say("validate-result", "Valid: this model can train.", "ok");
+  if (await send("/api/training-jobs/check")) Slip.say("validate-result", "Valid: this model can train.", "ok");
 }
 
 async function train(event) {
@@ -286,16 +267,16 @@ function build() {
 async function start() {
   const answer = await Slip.api("/api/garage/catalogue");
   if (!answer.ok) {
-    say("validate-result", "The garage's catalogue could not be loaded: " + Create.errorText(answer), "error");
+    Slip.say("validate-result", "The garage's catalogue could not be loaded: " + Slip.errorText(answer), "error");
     return;
   }
   catalogue = answer.body;
   build();
-  if (!Slip.token()) say("validate-result", "Paste your API token (top right) to validate and train.", "");
+  if (!Slip.token()) Slip.say("validate-result", "Paste your API token (top right) to validate and train.", "");
   if (cloneOf) {
     const job = await Slip.api(`/api/training-jobs/${cloneOf}`);
     if (job.ok) fillFrom(job.body);
-    else say("validate-result", Create.errorText(job), "error");
+    else Slip.say("validate-result", Slip.errorText(job), "error");
   }
   $("create-form").dataset.ready = "true";
 }

@@ -2,13 +2,8 @@
 // delete (GET /api/training-jobs, GET /api/models, the track thumbnails of the catalogue).
 "use strict";
 
-const ENDED = ["done", "stopped", "failed"];
-
 function note(text, kind) {
-  const box = document.getElementById("garage-note");
-  box.className = "result" + (kind ? " " + kind : "");
-  box.textContent = text;
-  box.hidden = !text;
+  Slip.say("garage-note", text, kind);
 }
 
 function actionButton(label, onClick, attrs) {
@@ -32,7 +27,7 @@ async function deleteJob(job) {
 }
 
 function jobRow(job, thumbnails) {
-  const ended = ENDED.includes(job.status);
+  const ended = Slip.TRAINING_ENDED.includes(job.status);
   const thumb = thumbnails[job.options.track];
   const status = Slip.el("td", {}, Slip.el("span", { class: `badge status-${job.status}` }, job.status));
   if (job.error) status.append(Slip.el("div", { class: "error small" }, job.error));

@@ -3,7 +3,6 @@
 "use strict";
 
 const Training = {
-  ENDED: ["done", "stopped", "failed"],
   SLOWER_EVALUATIONS: 3, // evaluations in a row slower than the best before the warning
   SLOWER_BY: 1.05, // "slower": over 5% above the best lap
 
@@ -68,16 +67,14 @@ page.jobId = Number(page.root.dataset.jobId);
 const byId = (id) => document.getElementById(id);
 
 function note(text, kind) {
-  const box = byId("job-note");
-  box.className = "result" + (kind ? " " + kind : "");
-  box.textContent = text;
+  Slip.say("job-note", text, kind);
 }
 
 function renderJob(job) {
   page.job = job;
   byId("job-title").textContent = job.name;
   const status = byId("status");
-  status.textContent = job.status + (job.stop_requested && !Training.ENDED.includes(job.status) ? " (stopping)" : "");
+  status.textContent = job.status + (job.stop_requested && !Slip.TRAINING_ENDED.includes(job.status) ? " (stopping)" : "");
   status.dataset.status = job.status;
   status.className = "badge status-" + job.status;
   const facts = [
@@ -89,7 +86,7 @@ function renderJob(job) {
   ].filter(Boolean);
   byId("job-facts").textContent = facts.join(" · ");
   if (job.error) note(job.error, "error");
-  byId("stop").hidden = Training.ENDED.includes(job.status);
+  byId("stop").hidden = Slip.TRAINING_ENDED.includes(job.status);
   byId("download").hidden = !job.has_run;
   if (job.model_id) showModelActions(job);
 }
@@ -175,7 +172,7 @@ async function follow() {
     }
     const answer = await Slip.api(`/api/training-jobs/${page.jobId}`);
     if (answer.ok) renderJob(answer.body);
-    if ((answer.ok && Training.ENDED.includes(answer.body.status)) || status === 404) return;
+    if ((answer.ok && Slip.TRAINING_ENDED.includes(answer.body.status)) || status === 404) return;
     await new Promise((resolve) => window.setTimeout(resolve, 1000));
   }
 }
@@ -204,12 +201,6 @@ async function showModelActions(job) {
   );
   byId("submit").disabled = !open.length;
   loadEvaluations();
-}
-
-function say(id, text, kind, ...children) {
-  const box = byId(id);
-  box.className = "result" + (kind ? " " + kind : "");
-  box.replaceChildren(text, ...children);
 }
 
 async function loadEvaluations() {
@@ -243,14 +234,14 @@ byId("evaluate-form").addEventListener("submit", async (e) => {
     race_type: page.job.race_type === "head_to_model" ? "time_trial" : page.job.race_type,
     laps: Number(byId("evaluate-laps").value),
   };
-  say("evaluate-result", "Queuing the evaluation…", "");
+  Slip.say("evaluate-result", "Queuing the evaluation…", "");
   const answer = await Slip.api(`/api/models/${page.job.model_id}/evaluations`, {
     method: "POST",
     headers: { "Content-Type": "application/json" },
     body: JSON.stringify(body),
   });
-  if (!answer.ok) return say("evaluate-result", answer.body?.detail || `Refused (HTTP ${answer.status}).`, "error");
-  say("evaluate-result", "Queued: a league worker races it; the result and its replay appear below.", "ok");
+  if (!answer.ok) return Slip.say("evaluate-result", Slip.errorText(answer), "error");
+  Slip.say("evaluate-result", "Queued: a league worker races it; the result and its replay appear below.", "ok");
   loadEvaluations();
 });
 
@@ -263,8 +254,8 @@ byId("submit-form").addEventListener("submit", async (e) => {
     headers: { "Content-Type": "application/json" },
     body: JSON.stringify({ model_id: page.job.model_id }),
   });
-  if (!answer.ok) return say("submit-result", answer.body?.detail || `Refused (HTTP ${answer.status}).`, "error");
-  say("submit-result", "Entered. ", "ok", Slip.el("a", { href: `/events/${eventId}` }, "See the leaderboard"));
+  if (!answer.ok) return Slip.say("submit-result", Slip.errorText(answer), "error");
+  Slip.say("submit-result", "Entered. ", "ok", Slip.el("a", { href: `/events/${eventId}` }, "See the leaderboard"));
 });
 
 // ---------------------------------------------------------------- stop and download
