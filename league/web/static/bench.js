@@ -98,8 +98,6 @@ async function rescore() {
     return Slip.say("rescore-result", text, "error");
   }
   const result = answer.body;
-  const original = result.original_total === null ? "" : `, original ${result.original_total.toFixed(2)}`;
-  Slip.say("rescore-result", `${result.steps} steps: total ${result.total.toFixed(2)}${original}.`, "ok");
   const where = await sourceTrack(chosen);
   const geometry = where && (await geometryOf(where.track, where.direction));
   if (geometry) {
@@ -117,6 +115,9 @@ async function rescore() {
       ),
     ),
   );
+  // said last, once the heat lines and the table are drawn
+  const original = result.original_total === null ? "" : `, original ${result.original_total.toFixed(2)}`;
+  Slip.say("rescore-result", `${result.steps} steps: total ${result.total.toFixed(2)}${original}.`, "ok");
 }
 
 // ---------------------------------------------------------------- compare runs
