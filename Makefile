@@ -23,8 +23,12 @@ demo: install
 lint: install
 	$(BIN)/ruff check .
 
+# The suite on every core (pytest-xdist), a test file per process: a file's tests share
+# its server and database. `make test TEST_WORKERS=0` runs it in one process.
+TEST_WORKERS ?= auto
+
 test: install lint
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 # The quick benchmarks, each under about 30 s on a 2-core machine; each prints its table and
 # appends it to benchmarks/results/ (`make bench BENCH_ARGS=--no-record` only prints).

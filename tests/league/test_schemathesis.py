@@ -31,7 +31,8 @@ def _fuzz(league: League, operation, headers: dict[str, str], failures: list[str
     def run(case) -> None:
         nonlocal counted
         counted += 1
-        response = case.call(base_url=league.url, headers=headers)
+        # A generous timeout: the suite shares the cores with trainers and browsers.
+        response = case.call(base_url=league.url, headers=headers, timeout=60)
         if response.status_code >= 500:
             failures.append(f"{case.method} {case.formatted_path}: {response.text[:200]}")
 
