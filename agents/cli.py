@@ -170,9 +170,18 @@ def train(
             _fail("give --minutes or --iterations")
         hp = _hyperparameters(hyperparameters, recipe)
         trainer = Trainer(run_settings, out, hp, clone=clone, resume=resume)
-    except (ValueError, ValidationError, FileNotFoundError) as exc:
+    except ValidationError as exc:
+        _fail("; ".join(_setting_error(e) for e in exc.errors()))
+    except (ValueError, FileNotFoundError) as exc:
         _fail(str(exc))
     _train(trainer)
+
+
+def _setting_error(error: Any) -> str:
+    """One of pydantic's errors as ``--option: message``."""
+    where = "--" + "-".join(str(p) for p in error.get("loc", ())).replace("_", "-")
+    message = str(error.get("msg", "")).removeprefix("Value error, ")
+    return message if where == "--" else f"{where}: {message}"
 
 
 def _train(trainer: Any) -> None:

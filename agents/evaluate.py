@@ -56,8 +56,11 @@ def evaluation_config(
     num_cars: int | None = None,
     direction: str | None = None,
     stack_size: int = 1,
+    **rules: Any,
 ) -> RaceConfig:
-    """A race-mode config for evaluating one trained policy (``direction``: the file's)."""
+    """A race-mode config for evaluating one trained policy (``direction``: the file's;
+    ``rules``: other :class:`RaceConfig` fields, such as the race type's ``obstacles`` or
+    ``bots``)."""
     return arena.make_config(
         track=track,
         direction=direction,
@@ -70,6 +73,7 @@ def evaluation_config(
         laps=laps,
         time_limit_s=time_limit_s,
         stack_size=stack_size,
+        **rules,
     )
 
 

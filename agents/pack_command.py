@@ -1,6 +1,7 @@
 """``slipstream model pack``: a submission from a training run, or from a graph trained elsewhere.
 
-``pack RUN`` packs a Slipstream run's model, its best evaluation's (:meth:`agents.run.Run.pack`);
+``pack RUN`` packs a Slipstream run's model, its best evaluation's, or another of its
+checkpoints with ``--checkpoint`` (:meth:`agents.run.Run.pack`);
 ``pack --onnx policy.onnx --metadata model_metadata.json`` takes any trainer's ONNX graph
 and a DeepRacer metadata file, fills Slipstream's section from the graph
 (:func:`submissions.from_graph.derive_section`) and packs them. Either way the archive is
@@ -17,6 +18,7 @@ from typing import Annotated, Any, NoReturn
 import typer
 from rich.text import Text
 
+from agents.checkpoint import Which
 from agents.model_metadata import DeepRacerMetadata, ModelMetadataError, read_model_metadata
 from submissions.cli import console, print_info, print_problems
 from submissions.from_graph import GraphSection, GraphSpecError, derive_section
@@ -67,12 +69,15 @@ def _pack_graph(tmp: Path, graph: Path, metadata: Path, extras: dict[str, Any]) 
     )
 
 
-def _pack_run(tmp: Path, run: Path) -> None:
+def _pack_run(tmp: Path, run: Path, which: Which | None) -> None:
+    from agents.checkpoint import checkpoint_path
     from agents.run import Run  # torch: only for this form
 
+    if which is not None and not checkpoint_path(run, which).exists():
+        _fail(f"the run {run} has no {which} checkpoint ({checkpoint_path(run, which)})")
     try:
         with console.status(f"exporting the actor of {run} to ONNX..."):
-            Run.load(run).pack(tmp)
+            Run.load(run).pack(tmp, which)
     except (FileNotFoundError, ValueError) as exc:
         _fail(f"cannot pack the run {run}: {exc}")
 
@@ -96,6 +101,14 @@ def pack_command(
     metrics: Annotated[
         Path | None, typer.Option("--metrics", help="Training metrics CSV kept for the record.")
     ] = None,
+    checkpoint: Annotated[
+        Which | None,
+        typer.Option(
+            "--checkpoint",
+            help="The RUN's checkpoint to pack: best (by completion), fastest (by "
+            "evaluation lap) or last. Default: best, else last.",
+        ),
+    ] = None,
 ) -> None:
     """Pack a submission from a training RUN, or from --onnx and --metadata.
 
@@ -109,10 +122,12 @@ def pack_command(
         raise typer.BadParameter("--onnx needs --metadata", param_hint="--metadata")
     if run is not None and (metadata or reward_function or metrics):
         raise typer.BadParameter("only with --onnx", param_hint="--metadata/--reward-function")
+    if run is None and checkpoint is not None:
+        raise typer.BadParameter("only with a RUN folder", param_hint="--checkpoint")
     tmp = out.with_name(f".{out.name}.partial")
     try:
         if run is not None:
-            _pack_run(tmp, run)
+            _pack_run(tmp, run, checkpoint)
         else:
             assert onnx_file is not None and metadata is not None
             extras = {"reward_function": reward_function, "metrics_csv": metrics}

@@ -11,12 +11,15 @@ Run layout (``RUN`` = the folder; deepracer-for-cloud's, so DeepRacer tools read
     RUN/metrics.csv, RUN/reward_graph.png           console-style metrics and graph
     RUN/metrics/TrainingMetrics.json                DeepRacer's per-episode metrics
     RUN/training_params.yaml                        WORLD_NAME (the track) and race type
-    RUN/checkpoints/last.pt, best.pt                state dicts (torch, weights_only)
+    RUN/checkpoints/last.pt, best.pt, fastest.pt    state dicts (torch, weights_only)
+    RUN/models/<checkpoint>.zip, index.json         each checkpoint packed (league jobs)
     RUN/tensorboard/                                rsl-rl's TensorBoard events
 """
 
 from __future__ import annotations
 
+import json
+import shutil
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -26,7 +29,14 @@ import torch
 
 import arena
 from agents import evaluate, export, networks
-from agents.checkpoint import Which, checkpoint_path, model_checkpoint, read_checkpoint
+from agents.checkpoint import (
+    CHECKPOINT_INDEX,
+    CHECKPOINTS,
+    Which,
+    checkpoint_path,
+    model_checkpoint,
+    read_checkpoint,
+)
 from agents.deepracer_metrics import write_training_params
 from agents.hyperparameters import Hyperparameters
 from agents.model_metadata import DeepRacerMetadata, write_model_metadata
@@ -114,6 +124,12 @@ class Run:
             return None
         return tuple(self.checkpoint(which="best")["eval_score"])
 
+    def fastest_lap(self) -> float | None:
+        """The evaluation lap kept with ``fastest.pt`` (None without one)."""
+        if not checkpoint_path(self.path, "fastest").exists():
+            return None
+        return float(self.checkpoint(which="fastest")["eval_best_lap"])
+
     def actor(self, device: str = "cpu", checkpoint: dict | None = None) -> torch.nn.Module:
         """The trained actor in eval mode (weights of ``checkpoint``, default the model's)."""
         s = self.settings
@@ -124,9 +140,10 @@ class Run:
         return actor.to(device).eval()
 
     def evaluation_config(self, **changes: Any) -> RaceConfig:
-        """The race the run's evaluations drive (its track, direction, race type, laps,
-        seed and time limit, frames stacked as it trains), with ``changes`` to
-        :func:`agents.evaluate.evaluation_config`'s keywords."""
+        """The race the run's evaluations drive (its track, direction, race type with its
+        boxes or bots, laps, seed and time limit, frames stacked as it trains), with
+        ``changes`` to :func:`agents.evaluate.evaluation_config`'s keywords (another race
+        type takes its own default boxes or bots)."""
         s = self.settings
         race = {
             "track": s.track,
@@ -137,20 +154,68 @@ class Run:
             "direction": s.direction,
             **changes,
         }
+        if race["race_type"] == s.race_type:
+            race = {**s.race_rules(), **race}
         return evaluate.evaluation_config(
             sensors=s.sensors, action_space=s.action_space, stack_size=self.stack_size, **race
         )
 
-    def pack(self, out: str | Path) -> Path:
-        """Pack the model (its best evaluation's weights, else the last) as a submission at
-        ``out`` (not validated here).
+    def checkpoints(self) -> list[dict[str, Any]]:
+        """What each checkpoint the run keeps holds: its name (:data:`CHECKPOINTS`), what
+        it is the best by, the iteration and training time it was taken at, and for an
+        evaluation's checkpoint that evaluation's completion (%) and best lap."""
+        kept = []
+        for which, by in CHECKPOINTS.items():
+            if not checkpoint_path(self.path, which).exists():
+                continue
+            ckpt = self.checkpoint(which=which)
+            score = ckpt.get("eval_score")
+            kept.append(
+                {
+                    "name": which,
+                    "by": by,
+                    "iteration": int(ckpt["iteration"]),
+                    "minutes": round(float(ckpt["elapsed_s"]) / 60.0, 2),
+                    "completion": float(score[0]) if score else None,
+                    "best_lap": ckpt.get("eval_best_lap"),
+                }
+            )
+        return kept
+
+    def pack_checkpoints(self, folder: str | Path) -> list[dict[str, Any]]:
+        """Pack each checkpoint the run keeps as ``folder/<name>.zip`` and list them in
+        ``folder/index.json`` (:meth:`checkpoints`, each with its ``file``); returns the
+        list. The model's own checkpoint is a copy of ``model.zip`` when it is packed, and
+        checkpoints of the same iteration share one archive's bytes, so the same weights
+        make the same league model."""
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        kept = self.checkpoints()
+        packed: dict[int, Path] = {}
+        if self.model_zip.is_file():
+            model = read_checkpoint(self.path, which=model_checkpoint(self.path))
+            packed[int(model["iteration"])] = self.model_zip
+        for entry in kept:
+            entry["file"] = f"{entry['name']}.zip"
+            out = folder / entry["file"]
+            same = packed.get(entry["iteration"])
+            if same is not None:
+                shutil.copyfile(same, out)
+            else:
+                packed[entry["iteration"]] = self.pack(out, entry["name"])
+        (folder / CHECKPOINT_INDEX).write_text(json.dumps(kept, indent=1))
+        return kept
+
+    def pack(self, out: str | Path, which: Which | None = None) -> Path:
+        """Pack the model as a submission at ``out`` (not validated here): the weights of
+        checkpoint ``which``, by default the model's (its best evaluation's, else the last).
 
         The archive holds the exported actor, the run's DeepRacer metadata, its reward file
         when it still exists, ``metrics.csv`` and a training summary (with the best lap of
         the packed weights' evaluation).
         """
         s = self.settings
-        ckpt = self.checkpoint()
+        ckpt = self.checkpoint(which=which)
         actor = self.actor(checkpoint=ckpt)
         reward = Path(s.reward_fn)
         reward_source = reward.read_text() if reward.suffix == ".py" and reward.is_file() else None

@@ -9,14 +9,15 @@ start-up.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from agents.privileged import CriticInput
 from arena.actions import ActionSpace, DiscreteActionSpace
-from arena.config import RACE_TYPES, RaceType
+from arena.config import RACE_TYPES, BotConfig, ObstacleConfig, RaceType
 from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
@@ -25,6 +26,7 @@ RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads", "sy
 # of a worker carries a fixed cost (pipe, pickling, waking it), which two races share
 # (measured by benchmarks/train_profile.py --races).
 RACES_PER_WORKER = 2
+_BOXES, _BOTS = ObstacleConfig(), BotConfig()  # the league's defaults, named in the help
 
 
 class TrainSettings(BaseModel):
@@ -37,6 +39,25 @@ class TrainSettings(BaseModel):
         None, description="ccw or cw (default: the way the track's file runs)."
     )
     race_type: RaceType = Field("time_trial", description=" | ".join(RACE_TYPES))
+    boxes: int | None = Field(
+        None, description=f"object_avoidance: boxes on the track (default {_BOXES.count})."
+    )
+    bots: int | None = Field(
+        None, description=f"head_to_bot: bot cars on the track (default {_BOTS.count})."
+    )
+    bot_speed: float | None = Field(
+        None, description=f"head_to_bot: the bots' speed in m/s (default {_BOTS.speed:g})."
+    )
+    bot_lane_change_min_s: float | None = Field(
+        None,
+        description="head_to_bot: fewest seconds between a bot's lane changes "
+        f"(default {_BOTS.lane_change_min_s:g}).",
+    )
+    bot_lane_change_max_s: float | None = Field(
+        None,
+        description="head_to_bot: most seconds between a bot's lane changes "
+        f"(default {_BOTS.lane_change_max_s:g}).",
+    )
     sensors: tuple[str, ...] = Field(
         ("camera",),
         description="Sensors; on the command line comma-separated, e.g. camera,lidar "
@@ -116,6 +137,28 @@ class TrainSettings(BaseModel):
         None, description="The recipe the settings were made from (agents/recipes.py)."
     )
 
+    @model_validator(mode="after")
+    def _race_settings_fit(self) -> TrainSettings:
+        self.race_rules()
+        return self
+
+    def race_rules(self) -> dict[str, ObstacleConfig | BotConfig]:
+        """The race type's boxes or bots (:data:`RACE_SECTIONS`): these settings over the
+        league's defaults (ValueError for settings of another race type, or out of range)."""
+        rules: dict[str, ObstacleConfig | BotConfig] = {}
+        for race_type, section in RACE_SECTIONS.items():
+            given = {
+                field: getattr(self, option)
+                for field, option in section.options.items()
+                if getattr(self, option) is not None
+            }
+            if race_type == self.race_type:
+                rules[section.key] = section.build(given)
+            elif given:
+                names = ", ".join(section.options[field] for field in given)
+                raise ValueError(f"{names}: only {race_type} races have {section.key}")
+        return rules
+
     @property
     def preset(self) -> str:
         """The network preset (default by sensors)."""
@@ -137,6 +180,45 @@ class TrainSettings(BaseModel):
     def discrete(self) -> bool:
         """Whether the action space is a discrete list."""
         return isinstance(self.action_space, DiscreteActionSpace)
+
+
+@dataclass(frozen=True)
+class RaceSection:
+    """A race type's section of :class:`~arena.config.RaceConfig` (``key``) and the
+    settings that set its fields (``options``: field -> setting)."""
+
+    key: str
+    kind: type[ObstacleConfig] | type[BotConfig]
+    options: dict[str, str]
+
+    def build(self, given: dict[str, Any]) -> ObstacleConfig | BotConfig:
+        """The section from ``given`` fields, its errors naming the settings."""
+        try:
+            return self.kind(**given)
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            field = str(first["loc"][0]) if first["loc"] else ""
+            where = self.options.get(field, ", ".join(self.options[k] for k in given))
+            message = first["msg"].removeprefix("Value error, ")
+            for name, option in self.options.items():
+                message = message.replace(name, option) if "_" in name else message
+            raise ValueError(f"{where}: {message}") from None
+
+
+RACE_SECTIONS = {
+    "object_avoidance": RaceSection("obstacles", ObstacleConfig, {"count": "boxes"}),
+    "head_to_bot": RaceSection(
+        "bots",
+        BotConfig,
+        {
+            "count": "bots",
+            "speed": "bot_speed",
+            "lane_change_min_s": "bot_lane_change_min_s",
+            "lane_change_max_s": "bot_lane_change_max_s",
+        },
+    ),
+}
+"""The race types with settings of their own (boxes, bots), by race type."""
 
 
 def overlapped(sync: bool | None, device: str) -> bool:

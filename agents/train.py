@@ -132,6 +132,7 @@ class Trainer:
         self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
         self.eval_opponent = evaluate.run_opponent(settings) if self.writes_run_folder else None
         self.best_score = stored.best_score() if stored else None
+        self.fastest_lap = stored.fastest_lap() if stored else None
 
     @property
     def settings(self) -> TrainSettings:
@@ -159,6 +160,7 @@ class Trainer:
             mode="training",
             seed=s.seed + 100_003 * _rank(),
             stack_size=self.target.stack_size,
+            **s.race_rules(),
         )
         pool = None
         learners = None
@@ -229,11 +231,16 @@ class Trainer:
             write_checkpoint(self.run_dir, content)
 
     def _save_if_best(self, content: dict[str, Any], evaluation: EvalSummary) -> None:
-        """Keep ``content`` as ``best.pt`` when ``evaluation`` beats the run's best."""
+        """Keep ``content`` as ``best.pt`` when ``evaluation`` beats the run's best, and as
+        ``fastest.pt`` when its best lap beats the run's fastest."""
+        kept = {"eval_score": list(evaluation.score), "eval_best_lap": evaluation.best_lap}
         if self.best_score is None or evaluation.score > self.best_score:
             self.best_score = evaluation.score
-            best = {"eval_score": list(evaluation.score), "eval_best_lap": evaluation.best_lap}
-            write_checkpoint(self.run_dir, {**content, **best}, "best")
+            write_checkpoint(self.run_dir, {**content, **kept}, "best")
+        lap = evaluation.best_lap
+        if lap is not None and (self.fastest_lap is None or lap < self.fastest_lap):
+            self.fastest_lap = lap
+            write_checkpoint(self.run_dir, {**content, **kept}, "fastest")
 
     # ------------------------------------------------------------------- loop
     def run(self, on_iteration: Callable[[IterationStats], None] | None = None) -> TrainResult:

@@ -11,10 +11,10 @@ sandbox (``league.training.sandbox``). ``WORKDIR`` holds ``job.json`` (the spec 
 trainer's ``workers`` and ``threads``), ``reward.py`` and, for a clone, the parent run in
 ``parent/``. With ``--check`` it loads and pre-checks the reward function and prints one
 JSON line, ``{"ok": true}`` or ``{"error": message}``; otherwise it trains into
-``WORKDIR/run`` and prints one JSON line per iteration (``{"type": "iteration", ...}``)
-and a last one (``{"type": "done", ...}``); anything else it prints is a log line. A
-``STOP`` file in ``WORKDIR`` (or SIGTERM) stops it as Ctrl-C stops ``slipstream train``:
-finished work is kept and packed.
+``WORKDIR/run`` (each checkpoint packed in ``run/models/``) and prints one JSON line per
+iteration (``{"type": "iteration", ...}``) and a last one (``{"type": "done", ...}``);
+anything else it prints is a log line. A ``STOP`` file in ``WORKDIR`` (or SIGTERM) stops it
+as Ctrl-C stops ``slipstream train``: finished work is kept and packed.
 """
 
 from __future__ import annotations
@@ -39,6 +39,11 @@ JOB_OPTIONS = (
     "track",
     "direction",
     "race_type",
+    "boxes",
+    "bots",
+    "bot_speed",
+    "bot_lane_change_min_s",
+    "bot_lane_change_max_s",
     "sensors",
     "action_space",
     "network",
@@ -52,6 +57,9 @@ JOB_OPTIONS = (
 """The ``train`` options a job may set; the trainer decides workers, threads and device,
 the reward is the job's source, and files on the server are never named."""
 JOB_FILE, REWARD_FILE, RUN_DIR, PARENT_DIR = "job.json", "reward.py", "run", "parent"
+CHECKPOINT_MODELS_DIR = "models"
+"""Under ``RUN_DIR``: each checkpoint packed as a submission, for the racer to choose from
+(:meth:`agents.run.Run.pack_checkpoints`)."""
 STOP_FILE = "STOP"
 """Created by the trainer to stop the job (signals do not cross the sandbox's init)."""
 MAX_REWARD_SOURCE = 64 * 1024
@@ -190,6 +198,8 @@ def _run(trainer: Any) -> int:
         _emit({"type": "iteration", **record})
 
     result = trainer.run(on_iteration)
+    if result.model_zip is not None:
+        trainer.target.pack_checkpoints(trainer.run_dir / CHECKPOINT_MODELS_DIR)
     _emit(
         {
             "type": "done",

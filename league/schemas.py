@@ -369,6 +369,9 @@ class TrainingJobCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: ModelName = Field(description="The model's name once trained.")
+    description: str | None = Field(
+        default=None, max_length=255, description="What the model tries (shown in the garage)."
+    )
     reward_source: str | None = Field(
         default=None,
         min_length=1,
@@ -413,6 +416,7 @@ class TrainingJobOut(_Out):
     id: int
     owner: str
     name: str
+    description: str | None
     status: str
     priority: int
     options: dict[str, Any]
@@ -422,6 +426,9 @@ class TrainingJobOut(_Out):
     track: str = Field(description="The track it trains on (its options over its recipe's)")
     direction: Literal["ccw", "cw"] | None = Field(description="None: the track file's")
     race_type: str
+    race_settings: dict[str, OptionValue] = Field(
+        description="The race type's own settings the job sets (boxes, bots, bot_speed, ...)"
+    )
     minutes: float
     clone_of: int | None
     resume_of: int | None

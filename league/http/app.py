@@ -19,6 +19,7 @@ from league.http.ratelimit import RateLimitMiddleware
 from league.http.read_cache import ReadCache
 from league.http.routes import (
     analysis,
+    checkpoints,
     evaluations,
     events,
     garage,
@@ -151,7 +152,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.training_checks = asyncio.Semaphore(settings.validation_concurrency)
     app.state.training_feed = TrainingFeed(app.state.session_factory)  # live events
     api = (health, racers, models, events, jobs, races, tracks, training, evaluations)
-    api += (analysis, garage)
+    api += (checkpoints, analysis, garage)
     for module in (*api, web_model_data):
         app.include_router(module.router)
     app.include_router(web_routes.router)

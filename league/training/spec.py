@@ -15,7 +15,7 @@ from pydantic import ValidationError
 
 from agents.hyperparameters import Hyperparameters
 from agents.recipes import get_recipe
-from agents.settings import TrainSettings
+from agents.settings import RACE_SECTIONS, TrainSettings
 from agents.train_job import JOB_FILE, REWARD_FILE, job_settings, read_record
 from league.settings import Settings
 from league.training.launch import CHECK_CPU_SECONDS, limits_of, start_child, stop_child
@@ -29,15 +29,20 @@ class JobRefused(ValueError):
 
 
 def trains_on(spec: dict[str, Any]) -> dict[str, Any]:
-    """The track, direction (None: the track file's) and race type a job's spec trains on:
+    """The track, direction (None: the track file's), race type and the race type's own
+    settings that differ from the league's defaults (boxes, bots) a job's spec trains on:
     its options over its recipe's over ``slipstream train``'s defaults."""
     recipe = spec.get("recipe")
     options = {**(get_recipe(recipe).options if recipe else {}), **spec.get("options", {})}
     fields = TrainSettings.model_fields
+    race_type = options.get("race_type", fields["race_type"].default)
+    section = RACE_SECTIONS.get(race_type)
+    own = section.options.values() if section else ()
     return {
         "track": options.get("track", fields["track"].default),
         "direction": options.get("direction"),
-        "race_type": options.get("race_type", fields["race_type"].default),
+        "race_type": race_type,
+        "race_settings": {option: options[option] for option in own if option in options},
     }
 
 

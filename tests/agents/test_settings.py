@@ -120,3 +120,40 @@ def test_the_batch_grows_on_a_gpu_unless_told(grow_batch, device, steps_per_env,
 ])  # fmt: skip
 def test_collection_and_update_overlap_on_a_gpu_unless_told(sync, device, overlaps):
     assert overlapped(sync, device) is overlaps
+
+
+def test_a_race_type_s_own_settings_reach_its_training_and_evaluation_races(tmp_path):
+    from agents.run import Run
+    from agents.train import Trainer
+    from arena.config import BotConfig
+
+    options = {"race_type": "head_to_bot", "bots": 2, "bot_speed": 1.5, "sensors": "lidar"}
+    settings = settings_from_options({**options, "iterations": 1, "workers": 0})
+    trainer = Trainer(settings, tmp_path / "run", Hyperparameters())
+    env, _ = trainer._make_env()
+    env.close()
+    assert env.config.bots == BotConfig(count=2, speed=1.5)
+    trainer.target.write()
+    evaluation = Run.load(tmp_path / "run").evaluation_config()
+    assert evaluation.bots == BotConfig(count=2, speed=1.5)
+    # evaluated as another race type, it takes that type's own defaults
+    assert Run.load(tmp_path / "run").evaluation_config(race_type="time_trial").bots is None
+    boxes = settings_from_options({"race_type": "object_avoidance", "boxes": 3})
+    assert boxes.race_rules()["obstacles"].count == 3
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"race_type": "time_trial", "boxes": 3}, "boxes: only object_avoidance races"),
+        ({"race_type": "object_avoidance", "bot_speed": 1.0}, "bot_speed: only head_to_bot"),
+        ({"race_type": "head_to_bot", "bots": 9}, "bots: Input should be less than or equal to 6"),
+        (
+            {"race_type": "head_to_bot", "bot_lane_change_min_s": 6},
+            "bot_lane_change_min_s must not exceed bot_lane_change_max_s",
+        ),
+    ],
+)
+def test_race_settings_of_another_type_or_out_of_range_are_refused_by_name(options, message):
+    with pytest.raises(ValidationError, match=message):
+        settings_from_options(options)

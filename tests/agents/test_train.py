@@ -24,6 +24,8 @@ from agents.selfplay import read_policy_graph
 from agents.settings import TrainSettings, load_settings
 from agents.train import Trainer
 from agents.vecenv import RacingVecEnv
+from submissions.format import POLICY_MEMBER
+from submissions.validator import validate
 from tests.agents.clones import assert_clone_takes_the_actor
 
 SPACE = parse_action_space_spec("3x3@1.0")
@@ -282,9 +284,11 @@ def test_ctrl_c_during_an_update_keeps_the_weights_it_started_from(tmp_path, mon
         assert torch.equal(ckpt["actor_state_dict"][key], value), key
 
 
-def _eval(progress: float, incidents: int = 0, total: float | None = None) -> EvalSummary:
+def _eval(
+    progress: float, incidents: int = 0, total: float | None = None, lap: float | None = None
+) -> EvalSummary:
     laps = int(progress // 100 * 3)
-    return EvalSummary(laps, progress, None, total, incidents, 0, incidents, "finished")
+    return EvalSummary(laps, progress, lap, total, incidents, 0, incidents, "finished")
 
 
 def test_an_evaluation_is_ranked_by_progress_then_incidents_then_finish_time():
@@ -317,3 +321,40 @@ def test_the_packed_model_is_the_best_evaluation_s_and_resume_keeps_it(tmp_path,
     with zipfile.ZipFile(result.model_zip) as packed:  # repacked by the resumed run
         summary = json.loads(packed.read("model_metadata.json"))["slipstream"]["training"]
     assert summary["iterations"] == 3  # best.pt's iteration 2, counted from 1
+
+
+def test_the_fastest_lap_s_checkpoint_is_kept_and_each_checkpoint_packs(tmp_path, monkeypatch):
+    """best.pt by completion, fastest.pt by evaluation lap (kept across a resume), last.pt;
+    pack_checkpoints packs each as a valid submission of its own weights."""
+    scripted = [
+        _eval(100.0, 0, 40.0, lap=13.0),  # best by completion, fastest so far
+        _eval(100.0, 2, 33.0, lap=10.5),  # two off-tracks: not the best, but the fastest lap
+        _eval(60.0),  # no lap: neither
+        _eval(100.0, 1, 35.0, lap=11.0),  # resumed: slower than 10.5
+    ]
+    monkeypatch.setattr(Trainer, "_evaluate", lambda trainer, runner: scripted.pop(0))
+    run = tmp_path / "run"
+    Trainer(_settings(iterations=3, eval_every=1), run, TINY).run()
+    Trainer(_settings(iterations=1, eval_every=1), run, TINY, resume=True).run()
+    assert not scripted
+
+    kept = Run.load(run).pack_checkpoints(tmp_path / "models")
+    by_name = {c["name"]: c for c in kept}
+    assert [c["name"] for c in kept] == ["best", "fastest", "last"]
+    assert [by_name[n]["iteration"] for n in ("best", "fastest", "last")] == [0, 1, 3]
+    assert (by_name["best"]["best_lap"], by_name["fastest"]["best_lap"]) == (13.0, 10.5)
+    assert by_name["fastest"]["completion"] == 100.0 and by_name["last"]["best_lap"] is None
+    assert json.loads((tmp_path / "models" / "index.json").read_text()) == kept
+
+    graphs = set()
+    for name in ("best", "fastest", "last"):
+        archive = tmp_path / "models" / f"{name}.zip"
+        report = validate(archive)
+        assert report.ok, (name, report.problems)
+        with zipfile.ZipFile(archive) as packed:
+            summary = json.loads(packed.read("model_metadata.json"))["slipstream"]["training"]
+            graphs.add(packed.read(POLICY_MEMBER))
+        assert summary["iterations"] == by_name[name]["iteration"] + 1
+    assert len(graphs) == 3  # three different sets of weights
+    # the model's own checkpoint is the run's model.zip, byte for byte (one league model)
+    assert (tmp_path / "models" / "best.zip").read_bytes() == Run.load(run).model_zip.read_bytes()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from agents.action_spaces import parse_action_space_spec
+from agents.options import settings_from_options
 from agents.rewards import bundled_samples
 from arena.sensors_spec import check_sensors
 from league.models import TrainingEvent, TrainingJob, utcnow
@@ -53,8 +54,18 @@ def test_the_catalogue_says_what_training_accepts(league: League) -> None:
     assert {s["name"] for s in found["reward_samples"]} == set(bundled_samples())
     assert next(r for r in found["recipes"] if r["name"] == "head_to_model")["needs_parent"]
     assert found["limits"]["max_minutes"] == league.settings.training_max_minutes
-    boxes = next(r for r in found["race_types"] if r["name"] == "object_avoidance")
-    assert boxes["settings"]["boxes"] >= 1
+    own = {r["name"]: {s["option"]: s for s in r["settings"]} for r in found["race_types"]}
+    assert own["time_trial"] == {} and set(own["object_avoidance"]) == {"boxes"}
+    bots = own["head_to_bot"]
+    assert (bots["bots"]["default"], bots["bots"]["min"], bots["bots"]["max"]) == (3, 1, 6)
+    # each is a training option, taken at its range's ends and refused past them
+    for race_type, settings in own.items():
+        for option, spec in settings.items():
+            ends = {option: spec.get("max", spec["default"])}
+            settings_from_options({"race_type": race_type, **ends})
+            if "max" in spec:
+                with pytest.raises(ValueError, match=option):
+                    settings_from_options({"race_type": race_type, option: spec["max"] + 1})
 
 
 def test_track_thumbnails_are_svg_and_unknown_tracks_404(league: League) -> None:

@@ -61,7 +61,14 @@ def test_a_valid_job_is_queued_and_its_owner_reads_it(league: League) -> None:
         job = created.json()
         assert job["status"] == "queued" and job["owner"] == "alice"
         assert job["options"] == OPTIONS and job["minutes"] == 1
-        assert [j["id"] for j in alice.get("/api/training-jobs").json()] == [job["id"]]
+        assert job["description"] is None and job["race_settings"] == {}
+        bots = {"race_type": "head_to_bot", "bots": 2, "bot_speed": 1.2}
+        described = _body(options={**OPTIONS, **bots}, description="two quick bots")
+        second = alice.post("/api/training-jobs", json=described).json()
+        assert second["description"] == "two quick bots"
+        assert second["race_settings"] == {"bots": 2, "bot_speed": 1.2}
+        listed = [j["id"] for j in alice.get("/api/training-jobs").json()]
+        assert listed == [second["id"], job["id"]]
         assert bob.get(f"/api/training-jobs/{job['id']}").status_code == 404
         assert bob.get("/api/training-jobs").json() == []
 
@@ -104,6 +111,8 @@ def test_validate_checks_a_job_without_queuing_it(league: League) -> None:
         ({"workers": 16}, "cannot set workers"),
         ({"reward_fn": "/etc/shadow"}, "cannot set reward_fn"),
         ({"sensors": "radar"}, "radar"),
+        ({"race_type": "time_trial", "boxes": 3}, "boxes: only object_avoidance races"),
+        ({"race_type": "head_to_bot", "bots": 9}, "bots: Input should be less than or equal"),
     ],
 )
 def test_settings_a_job_may_not_have_are_refused_before_any_code_runs(

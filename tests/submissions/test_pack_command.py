@@ -103,6 +103,13 @@ def test_run_form_packs_a_training_run(tmp_path: Path) -> None:
     assert report.info.training_summary["iterations"] == 1
     assert report.info.has_metrics
 
+    last = tmp_path / "last.zip"
+    code, output = _pack(str(tmp_path / "run"), "--out", str(last), "--checkpoint", "last")
+    assert code == 0 and validate(last).ok, output
+    (tmp_path / "run" / "checkpoints" / "fastest.pt").unlink(missing_ok=True)
+    code, output = _pack(str(tmp_path / "run"), "--out", str(out), "--checkpoint", "fastest")
+    assert code == 2 and "hasnofastestcheckpoint" in "".join(output.split()), output
+
 
 def _metadata(tmp_path: Path, **changes: object) -> Path:
     data = {

@@ -1,9 +1,9 @@
 """The garage end to end, as a new racer uses it, in real Chromium against a real server,
 trainer and worker: open the garage, create a model from a sample reward, break the
 reward and see Validate point at the line, fix it, train for one minute while the reward
-graph and the live view move, evaluate the model on another track, submit it to an open
-event in one click and find it on the event's leaderboard, then re-score its evaluation
-race with an edited reward and see the heat line.
+graph and the live view move, choose the run's last checkpoint as the model, evaluate it
+on another track, submit it to an open event in one click and find it on the event's
+leaderboard, then re-score its evaluation race with an edited reward and see the heat line.
 
 With ``SLIPSTREAM_WEB_SCREENSHOTS=docs/img`` the pages are saved for ``docs/web.md``.
 """
@@ -18,8 +18,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from sqlalchemy import select
 
 from league import crud
+from league.models import Entry
 from league.training.sandbox import probe
 from tests.league.conftest import League
 from tests.league.helpers import create_event, start_daemon
@@ -125,6 +127,15 @@ def test_a_new_racer_creates_trains_evaluates_submits_and_rescores_in_the_browse
         job = admin.get(f"/api/training-jobs/{job_id}").json()
     assert job["model_id"] is not None, job
 
+    # The run kept its checkpoints; the job's model is the best one's. Choose the last.
+    page.wait_for_selector("#checkpoints tr[data-checkpoint=last]")
+    assert page.is_checked("#checkpoint-best")
+    page.check("#checkpoint-last")
+    page.click("#use-checkpoint")
+    page.wait_for_selector("#checkpoint-result.ok")
+    chosen = int(re.search(r"Model (\d+)", page.inner_text("#checkpoint-result")).group(1))
+    assert page.get_attribute("#model-link a", "href") == f"/models/{chosen}"
+
     # Evaluate on another track; the worker races it; its replay is linked.
     page.select_option("#evaluate-track", EVALUATION_TRACK)
     page.select_option("#evaluate-direction", "cw")
@@ -139,6 +150,9 @@ def test_a_new_racer_creates_trains_evaluates_submits_and_rescores_in_the_browse
     page.click("#submit")
     page.wait_for_selector(f"#submit-result a[href='/events/{event['id']}']")
     _shot(page, screenshot_dir, "garage-evaluate-submit.png", "#model-actions")
+    with league.sessions() as session:
+        entered = session.scalars(select(Entry.model_id).where(Entry.event_id == event["id"]))
+        assert list(entered) == [chosen]
     page.click(f"#submit-result a[href='/events/{event['id']}']")
     page.wait_for_function(
         "() => Array.from(document.querySelectorAll('#leaderboard tbody tr'))"

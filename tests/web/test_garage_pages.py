@@ -152,6 +152,25 @@ def test_create_a_model_validates_the_reward_and_builds_the_action_space(
     page.wait_for_selector("#validate-result.ok")
     assert page.get_attribute(".CodeMirror", "data-marked-lines") is None
 
+    # A race type's own settings: head-to-bot offers its bots, their speed and lane
+    # changes at the league's defaults; only what the racer changes goes to the server.
+    page.check("#race-head_to_bot")
+    assert page.input_value("#race-bots") == "3" and page.locator("#race-bot_speed").count()
+    page.fill("#race-bots", "2")
+    page.fill("#model-description", "two bots at the default speed")
+    body = page.evaluate("() => Create.jobBody(formState())")
+    assert body["options"]["race_type"] == "head_to_bot" and body["options"]["bots"] == 2
+    assert "bot_speed" not in body["options"]
+    assert body["description"] == "two bots at the default speed"
+    page.click("#validate")
+    page.wait_for_selector("#validate-result.ok")
+    page.fill("#race-bots", "9")
+    page.click("#validate")
+    page.wait_for_selector("#validate-result.error")
+    assert "bots" in page.inner_text("#validate-result")
+    page.check("#race-object_avoidance")
+    assert page.locator("#race-bots").count() == 0 and page.input_value("#race-boxes") == "6"
+
     page.check("#action-type-continuous")
     assert page.inner_text("#action-spec").startswith("continuous:")
     assert page.locator(".polar .polar-sector").count() == 1

@@ -1,13 +1,16 @@
 """The training page in real Chromium: the reward graph and the live view from a job's
 events (as a trainer writes them; no training here), the warning when evaluation laps get
-slower while the reward rises, and a running job's graph growing as events arrive."""
+slower while the reward rises, a running job's graph growing as events arrive, and choosing
+another checkpoint of a stored run as the model to evaluate and submit."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from league.models import TrainingEvent, TrainingJob, utcnow
-from tests.league.conftest import League
+from tests.league.conftest import League, make_model_zip
+from tests.league.test_checkpoints import KEPT, checkpoint_index, run_zip
 from tests.web.test_browser import sign_in
 from tests.web.test_csp import violations, watch_csp
 
@@ -28,10 +31,12 @@ def _iteration(i: int, reward: float, lap: float | None = None) -> dict[str, Any
     return record
 
 
-def _job(league: League, status: str, events: list[tuple[str, dict]]) -> int:
+def _job(
+    league: League, status: str, events: list[tuple[str, dict]], spec: dict | None = None
+) -> int:
     with league.sessions() as session:
         job = TrainingJob(
-            owner_id=league.ids["alice"], name=f"page-{status}", status=status, spec=SPEC,
+            owner_id=league.ids["alice"], name=f"page-{status}", status=status, spec=spec or SPEC,
             reward_source="def reward_function(params):\n    return 1.0\n", minutes=5,
             started_at=utcnow(), finished_at=utcnow() if status == "done" else None,
         )  # fmt: skip
@@ -102,3 +107,45 @@ def test_a_running_jobs_graph_grows_as_its_trainer_reports(page, league: League)
         session.commit()
     page.wait_for_selector("#status[data-status=stopped]")
     assert page.is_hidden("#stop")
+
+
+def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submitted(
+    page, league: League, tmp_path: Path
+) -> None:
+    archives = {c.name: make_model_zip(tmp_path, 40 + i).read_bytes() for i, c in enumerate(KEPT)}
+    members = {"models/index.json": checkpoint_index(KEPT)}
+    members |= {f"models/{name}.zip": data for name, data in archives.items()}
+    with league.client("alice") as alice:
+        best = alice.post("/api/models", files={"file": ("best.zip", archives["best"])}).json()
+    sha, _ = league.storage.put("runs", run_zip(members))
+    spec = {**SPEC, "options": {"race_type": "head_to_bot", "bots": 2}, "description": "bots"}
+    job_id = _job(league, "done", [("status", {"status": "done", "error": None})], spec=spec)
+    with league.sessions() as session:
+        job = session.get_one(TrainingJob, job_id)
+        job.model_id, job.run_sha256 = best["id"], sha
+        session.commit()
+
+    console = watch_csp(page)
+    sign_in(page, league, "alice")
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#checkpoints tr[data-checkpoint=fastest]")
+    assert page.inner_text("#job-description") == "bots"
+    assert "head to bot (bots 2)" in page.inner_text("#job-facts")
+    laps = page.eval_on_selector_all(
+        "#checkpoints tbody tr", "rs => rs.map(r => r.cells[4].innerText)"
+    )
+    assert laps == ["0:12.400", "0:10.800", "—"]
+    assert page.is_checked("#checkpoint-best")  # the job's own model
+    assert page.get_attribute("#model-link a", "href") == f"/models/{best['id']}"
+
+    page.check("#checkpoint-fastest")
+    page.click("#use-checkpoint")
+    page.wait_for_selector("#checkpoint-result.ok")
+    with league.client("alice") as alice:
+        fastest = next(m for m in alice.get("/api/models").json() if m["name"].endswith("fastest"))
+    assert page.get_attribute("#model-link a", "href") == f"/models/{fastest['id']}"
+    page.wait_for_selector(
+        f"#checkpoints tr[data-checkpoint=fastest] a[href='/models/{fastest['id']}']"
+    )
+    assert page.is_checked("#checkpoint-fastest")
+    assert violations(page, console) == []

@@ -21,9 +21,9 @@ from agents import action_spaces
 from agents.hyperparameters import Hyperparameters
 from agents.recipes import RECIPES
 from agents.rewards import bundled_samples
-from agents.settings import TrainSettings
+from agents.settings import RACE_SECTIONS, TrainSettings
 from arena import actions
-from arena.config import RACE_TYPES, BotConfig, ObstacleConfig
+from arena.config import RACE_TYPES
 from arena.sensors_spec import SENSOR_NAMES, check_sensors
 from league.http.read_cache import Prepared, answer, prepared
 from tracks.catalog import builtin_names, get_track
@@ -60,24 +60,30 @@ def _tracks() -> list[dict[str, Any]]:
 
 
 def _race_types() -> list[dict[str, Any]]:
-    boxes, bots = ObstacleConfig(), BotConfig()
-    settings: dict[str, dict[str, Any]] = {
-        "object_avoidance": {"boxes": boxes.count, "box_gap_m": boxes.min_gap_m},
-        "head_to_bot": {
-            "bots": bots.count,
-            "bot_speed_mps": bots.speed,
-            "lane_changes_s": f"every {bots.lane_change_min_s:g}-{bots.lane_change_max_s:g}",
-        },
-    }
     return [
         {
             "name": name,
             "label": RACE_TYPE_TEXT[name][0],
             "description": RACE_TYPE_TEXT[name][1],
-            "settings": settings.get(name, {}),
+            "settings": _race_settings(name),
         }
         for name in RACE_TYPES
     ]
+
+
+def _race_settings(race_type: str) -> list[dict[str, Any]]:
+    """The race type's own settings (``agents.settings.RACE_SECTIONS``): each training
+    option with its help, the league's default and its range."""
+    section = RACE_SECTIONS.get(race_type)
+    if section is None:
+        return []
+    rows = []
+    for field, option in section.options.items():
+        info = section.kind.model_fields[field]
+        help_text = TrainSettings.model_fields[option].description or ""
+        row = {"option": option, "help": help_text.split(": ", 1)[-1], "default": info.default}
+        rows.append({**row, **_bounds(info)})
+    return rows
 
 
 def _sensors() -> dict[str, Any]:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import re
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Annotated, Any
 
 from fastapi import (
@@ -33,6 +35,8 @@ from league.http.upload_validation import (
 )
 from league.models import Entry, Event, Model, Racer
 from league.schemas import MAX_ID, ErrorOut, ModelName, ModelOut, ModelSuspension
+from league.store.base import FileStore
+from submissions import ValidationReport
 
 router = APIRouter(prefix="/api/models", tags=["models"])
 ModelId = Annotated[int, Path(ge=1, le=MAX_ID)]
@@ -96,8 +100,57 @@ def _name(given: str | None, filename: str | None) -> str:
     return stem or "model"
 
 
-def _upload_validator(request: Request) -> UploadValidator:
+VALIDATION_REFUSALS: dict[int | str, dict[str, Any]] = {
+    422: {"model": ErrorOut, "description": "The validator's problems"},
+    429: {"model": ErrorOut, "description": "Your other uploads are still being validated"},
+    503: {"model": ErrorOut, "description": "Validation is busy; retry after Retry-After s"},
+}
+"""The answers of a route that validates a model archive, beside its own."""
+
+
+def upload_validator(request: Request) -> UploadValidator:
+    """The app's validator of model archives (a dependency)."""
     return request.app.state.upload_validator
+
+
+@asynccontextmanager
+async def validation_slot(validator: UploadValidator, racer_id: int) -> AsyncIterator[None]:
+    """A validation slot for ``racer_id``: 503 with Retry-After when all are busy, 429 when
+    the racer already has as many validating or waiting as one racer may."""
+    try:
+        async with validator.slot(racer_id):
+            yield
+    except ValidationBusy as exc:
+        headers = {"Retry-After": str(RETRY_AFTER_SECONDS)}
+        status = 429 if isinstance(exc, RacerUploadLimit) else 503
+        raise HTTPException(status, f"{exc} Try again later.", headers=headers) from None
+
+
+async def stored(
+    report: ValidationReport,
+    session: Session,
+    storage: FileStore,
+    owner: Racer,
+    name: str,
+    data: bytes,
+    response: Response,
+) -> ModelOut | JSONResponse:
+    """``data`` stored as one of ``owner``'s models when the validator accepted it (201;
+    200 when the owner has it already), else the 422 answer with the problems."""
+    if not report.ok or report.info is None:
+        return JSONResponse(
+            status_code=422,
+            content={
+                "detail": f"The model file was refused: {len(report.problems)} problem(s) found.",
+                "problems": [p.model_dump() for p in report.problems],
+            },
+        )
+    model, new = await run_in_threadpool(
+        crud.add_model, session, storage, owner, name, data, report.info
+    )
+    if not new:
+        response.status_code = 200
+    return await run_in_threadpool(model_out, model, True)
 
 
 @router.post(
@@ -107,9 +160,7 @@ def _upload_validator(request: Request) -> UploadValidator:
     responses={
         200: {"model": ModelOut, "description": "The same file was uploaded before"},
         413: {"model": ErrorOut, "description": "File too large"},
-        422: {"model": ErrorOut, "description": "The validator's problems"},
-        429: {"model": ErrorOut, "description": "Your other uploads are still being validated"},
-        503: {"model": ErrorOut, "description": "Validation is busy; retry after Retry-After s"},
+        **VALIDATION_REFUSALS,
     },
 )
 async def upload_model(
@@ -118,7 +169,7 @@ async def upload_model(
     session: SessionDep,
     settings: SettingsDep,
     storage: StorageDep,
-    validator: Annotated[UploadValidator, Depends(_upload_validator)],
+    validator: Annotated[UploadValidator, Depends(upload_validator)],
     response: Response,
     name: Annotated[str | None, Form(description="Display name; default: the file name")] = None,
 ) -> ModelOut | JSONResponse:
@@ -126,32 +177,13 @@ async def upload_model(
     Retry-After when all are busy, 429 when you already have as many uploads validating or
     waiting as one racer may); the same file twice gives the same model (200)."""
     model_name = _name(name, file.filename)
-    try:
-        async with validator.slot(racer.id):
-            data = await file.read(settings.max_upload_bytes + 1)
-            if len(data) > settings.max_upload_bytes:
-                limit = settings.max_upload_bytes
-                raise HTTPException(413, f"The model file is over the limit of {limit} bytes.")
-            report = await validator.validate(data)
-    except ValidationBusy as exc:
-        headers = {"Retry-After": str(RETRY_AFTER_SECONDS)}
-        status = 429 if isinstance(exc, RacerUploadLimit) else 503
-        raise HTTPException(status, f"{exc} Try again later.", headers=headers) from None
-    if not report.ok or report.info is None:
-        count = len(report.problems)
-        return JSONResponse(
-            status_code=422,
-            content={
-                "detail": f"The model file was refused: {count} problem(s) found.",
-                "problems": [p.model_dump() for p in report.problems],
-            },
-        )
-    model, new = await run_in_threadpool(
-        crud.add_model, session, storage, racer, model_name, data, report.info
-    )
-    if not new:
-        response.status_code = 200
-    return await run_in_threadpool(model_out, model, True)
+    async with validation_slot(validator, racer.id):
+        data = await file.read(settings.max_upload_bytes + 1)
+        if len(data) > settings.max_upload_bytes:
+            limit = settings.max_upload_bytes
+            raise HTTPException(413, f"The model file is over the limit of {limit} bytes.")
+        report = await validator.validate(data)
+    return await stored(report, session, storage, racer, model_name, data, response)
 
 
 @router.get("", response_model=list[ModelOut])

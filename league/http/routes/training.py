@@ -62,6 +62,7 @@ def job_out(job: TrainingJob) -> TrainingJobOut:
         id=job.id,
         owner=job.owner.alias,
         name=job.name,
+        description=spec.get("description"),
         status=job.status,
         priority=job.priority,
         options=spec.get("options", {}),
@@ -85,7 +86,7 @@ def job_out(job: TrainingJob) -> TrainingJobOut:
     )
 
 
-def _visible(session: Session, racer: Racer, job_id: int) -> TrainingJob:
+def visible_job(session: Session, racer: Racer, job_id: int) -> TrainingJob:
     """The caller's job (admins: anyone's), else 404."""
     job = session.get(TrainingJob, job_id)
     if job is None or (racer.role != "admin" and job.owner_id != racer.id):
@@ -146,7 +147,7 @@ def _parent(session: Session, racer: Racer, body: TrainingJobCreate) -> Training
     if parent_id is None:
         return None
     field = "clone_of" if body.clone_of else "resume_of"
-    parent = _visible(session, racer, parent_id)
+    parent = visible_job(session, racer, parent_id)
     if parent.run_sha256 is None:
         raise HTTPException(422, f"{field}: training job {parent.id} has no stored run.")
     recipe = parent.spec.get("recipe")
@@ -197,7 +198,7 @@ async def create_training_job(
     job = TrainingJob(
         owner_id=racer.id,
         name=body.name,
-        spec=fields,
+        spec={**fields, "description": body.description} if body.description else fields,
         reward_source=_reward_source(body, parent),
         minutes=body.minutes,
         clone_of_id=parent.id if parent is not None else None,
@@ -261,14 +262,14 @@ def read_quota(racer: CurrentRacer, session: SessionDep, settings: SettingsDep) 
 @router.get("/{job_id}", response_model=TrainingJobOut, responses={404: {"model": ErrorOut}})
 def read_training_job(job_id: JobId, racer: CurrentRacer, session: SessionDep) -> TrainingJobOut:
     """One of your training jobs."""
-    return job_out(_visible(session, racer, job_id))
+    return job_out(visible_job(session, racer, job_id))
 
 
 @router.post("/{job_id}/stop", response_model=TrainingJobOut, responses={404: {"model": ErrorOut}})
 def stop_training_job(job_id: JobId, racer: CurrentRacer, session: SessionDep) -> TrainingJobOut:
     """Stop a job: a queued one at once; a running one within a heartbeat, keeping the
     model trained so far."""
-    job = _visible(session, racer, job_id)
+    job = visible_job(session, racer, job_id)
     request_stop(session, job)
     return job_out(job)
 
@@ -280,7 +281,7 @@ def delete_training_job(job_id: JobId, racer: CurrentRacer, session: SessionDep)
     """Delete an ended job and its progress; its model stays one of your models, and its
     stored run is swept with the other files no row refers to. 409 while it is queued or
     running (stop it first)."""
-    job = _visible(session, racer, job_id)
+    job = visible_job(session, racer, job_id)
     if job.status in ("queued", "running"):
         raise HTTPException(409, f"Training job {job_id} is {job.status}; stop it first.")
     session.execute(delete(TrainingEvent).where(TrainingEvent.job_id == job.id))
@@ -294,7 +295,7 @@ def update_training_job(
     job_id: JobId, body: TrainingJobUpdate, admin: AdminRacer, session: SessionDep
 ) -> TrainingJobOut:
     """Re-prioritise a job (admins): among waiting jobs the highest priority starts first."""
-    job = _visible(session, admin, job_id)
+    job = visible_job(session, admin, job_id)
     job.priority = body.priority
     session.commit()
     return job_out(job)
@@ -321,7 +322,7 @@ def read_training_metrics(
 ) -> list[dict]:
     """The job's iterations (the reward graph's series, evaluations included) after the
     event id ``after``; each carries its event ``id``."""
-    _visible(session, racer, job_id)
+    visible_job(session, racer, job_id)
     rows = _events(session, job_id, "iteration", after, MAX_EVENTS)
     return [{"id": row.id, **row.data} for row in rows]
 
@@ -335,7 +336,7 @@ def read_training_logs(
 ) -> Response:
     """The job's log as text: its training program's output and status changes (of the
     next 1000 events after ``after``; ``X-Last-Event-Id`` is the ``after`` of the next)."""
-    _visible(session, racer, job_id)
+    visible_job(session, racer, job_id)
     lines = []
     rows = _events(session, job_id, "", after, MAX_EVENTS)
     for row in rows:
@@ -354,7 +355,7 @@ def download_run(
     job_id: JobId, racer: CurrentRacer, session: SessionDep, storage: StorageDep
 ) -> Response:
     """The run folder (deepracer-for-cloud layout) as a zip."""
-    job = _visible(session, racer, job_id)
+    job = visible_job(session, racer, job_id)
     if job.run_sha256 is None:
         raise HTTPException(404, f"Training job {job_id} has no stored run yet.")
     data = storage.read("runs", job.run_sha256)
@@ -373,7 +374,7 @@ async def stream_training_events(
 ) -> StreamingResponse:
     """The job's events live, as Server-Sent Events (``event:`` iteration, poses, log or
     status; ``id:`` resumes with ``Last-Event-ID``); the stream ends once the job ended."""
-    _visible(session, racer, job_id)
+    visible_job(session, racer, job_id)
     session.close()
     feed = request.app.state.training_feed
     return StreamingResponse(

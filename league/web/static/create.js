@@ -14,11 +14,13 @@ const Create = {
         track: form.track,
         direction: form.direction,
         race_type: form.raceType,
+        ...form.raceSettings,
         sensors: form.sensors.join(","),
         action_space: form.actionSpace,
       },
       minutes: form.minutes,
     };
+    if (form.description.trim()) body.description = form.description.trim();
     if (form.recipe) body.recipe = form.recipe;
     if (form.hyperparameters && Object.keys(form.hyperparameters).length) body.hyperparameters = form.hyperparameters;
     if (form.cloneOf) body.clone_of = form.cloneOf;
@@ -42,15 +44,15 @@ const Create = {
     return { blocked, valid };
   },
 
-  // Hyperparameters that differ from their defaults (the rest stay the recipe's or
-  // DeepRacer's), from {name: input text}.
-  changedHyperparameters(values, specs) {
+  // The settings (hyperparameters, a race type's) that differ from their defaults (the
+  // rest stay the recipe's or the league's), from {name: input text}; `key` names a spec.
+  changedValues(values, specs, key = "name") {
     const changed = {};
     for (const spec of specs) {
-      const text = values[spec.name];
+      const text = values[spec[key]];
       if (text === undefined || text === "") continue;
       const value = typeof spec.default === "number" ? Number(text) : text;
-      if (value !== spec.default) changed[spec.name] = value;
+      if (value !== spec.default) changed[spec[key]] = value;
     }
     return changed;
   },
@@ -80,7 +82,7 @@ function trackCard(track) {
 }
 
 function raceTypeCard(type) {
-  const settings = Object.entries(type.settings || {}).map(([k, v]) => `${k.replace(/_/g, " ")}: ${typeof v === "object" ? JSON.stringify(v) : v}`);
+  const settings = type.settings.map((s) => `${s.help}: ${s.default}`);
   return Slip.el(
     "label",
     { class: "pick-card", for: `race-${type.name}` },
@@ -120,6 +122,38 @@ function updateTrackDirection() {
   if (track) $("direction").value = track.direction;
 }
 
+function raceSettingSpecs() {
+  const type = catalogue.race_types.find((t) => t.name === checked("race_type"));
+  return type ? type.settings : [];
+}
+
+// The chosen race type's own settings (boxes; bots, their speed and lane changes), each at
+// `values[option]` or its league default.
+function updateRaceSettings(values = {}) {
+  const fields = raceSettingSpecs().map((spec) => {
+    const id = `race-${spec.option}`;
+    const whole = Number.isInteger(spec.default);
+    const input = Slip.el("input", {
+      id,
+      name: spec.option,
+      type: "number",
+      step: whole ? 1 : "any",
+      min: spec.min,
+      max: spec.max,
+      value: values[spec.option] ?? spec.default,
+    });
+    const help = spec.help.charAt(0).toUpperCase() + spec.help.slice(1);
+    return Slip.el("label", { for: id }, Slip.el("span", {}, help), input, Slip.el("small", { class: "muted" }, `league default ${spec.default}`));
+  });
+  $("race-settings").replaceChildren(...fields);
+}
+
+function raceSettingValues() {
+  const values = {};
+  for (const spec of raceSettingSpecs()) values[spec.option] = $(`race-${spec.option}`).value;
+  return Create.changedValues(values, raceSettingSpecs(), "option");
+}
+
 function updateFastStart() {
   const raceType = checked("race_type");
   const recipe = Create.fastStartRecipe(raceType, catalogue.recipes, Boolean(cloneOf));
@@ -150,13 +184,15 @@ function formState() {
   const fast = $("fast-start").checked ? Create.fastStartRecipe(checked("race_type"), catalogue.recipes, Boolean(cloneOf)) : null;
   return {
     name: $("model-name").value,
+    description: $("model-description").value,
     track: checked("track"),
     direction: $("direction").value,
     raceType: checked("race_type"),
+    raceSettings: raceSettingValues(),
     sensors: selectedSensors(),
     actionSpace: actions.spec(),
     reward: editor.getValue(),
-    hyperparameters: Create.changedHyperparameters(hyperparameterValues(), catalogue.hyperparameters),
+    hyperparameters: Create.changedValues(hyperparameterValues(), catalogue.hyperparameters),
     minutes: Number($("minutes").value),
     recipe: fast ? fast.name : null,
     cloneOf,
@@ -212,7 +248,9 @@ function fillFrom(job) {
   if (o.track) setChecked("track", o.track);
   updateTrackDirection();
   if (o.direction) $("direction").value = o.direction;
+  if (job.description) $("model-description").value = job.description;
   if (o.race_type) setChecked("race_type", o.race_type);
+  updateRaceSettings(o);
   if (o.sensors) {
     const wanted = String(o.sensors).split(",");
     for (const box of document.querySelectorAll('input[name="sensor"]')) box.checked = wanted.includes(box.value);
@@ -248,6 +286,7 @@ function build() {
   updateTrackDirection();
   if (d.direction) $("direction").value = d.direction;
   setChecked("race_type", d.race_type);
+  updateRaceSettings();
   const wanted = String(d.sensors).split(",");
   for (const box of document.querySelectorAll('input[name="sensor"]')) box.checked = wanted.includes(box.value);
   editor = SlipEditor.create($("reward"));
@@ -257,7 +296,10 @@ function build() {
   updateFastStart();
 
   $("tracks").addEventListener("change", updateTrackDirection);
-  $("race-types").addEventListener("change", updateFastStart);
+  $("race-types").addEventListener("change", () => {
+    updateRaceSettings();
+    updateFastStart();
+  });
   $("sensors").addEventListener("change", updateSensors);
   $("reward-load").addEventListener("click", loadSample);
   $("validate").addEventListener("click", validate);

@@ -35,7 +35,12 @@ function jobRow(job, thumbnails) {
     "tr",
     { "data-job-id": job.id },
     Slip.el("td", {}, thumb ? Slip.el("img", { src: thumb, alt: job.options.track, width: 72, height: 48, class: "thumb-img" }) : job.options.track || "—"),
-    Slip.el("td", {}, Slip.el("a", { href: `/garage/jobs/${job.id}` }, job.name)),
+    Slip.el(
+      "td",
+      {},
+      Slip.el("a", { href: `/garage/jobs/${job.id}` }, job.name),
+      job.description ? Slip.el("small", { class: "muted job-description" }, job.description) : null,
+    ),
     status,
     Slip.el("td", {}, Slip.ms(job.best_lap_ms)),
     Slip.el("td", {}, `${job.compute_minutes.toFixed(1)} / ${job.minutes}`),

@@ -1,5 +1,6 @@
 // /garage/jobs/{id}: one training job live (reward graph, a training race's top-down view,
-// evaluations, log), then its model evaluated on any track and submitted to an open event.
+// evaluations, log), then its model (or another of its checkpoints) evaluated on any track
+// and submitted to an open event.
 "use strict";
 
 const Training = {
@@ -70,16 +71,24 @@ function note(text, kind) {
   Slip.say("job-note", text, kind);
 }
 
+// The race type's own settings a job sets, e.g. " (bots 2, bot speed 1.2)".
+function raceSettingsText(settings) {
+  const given = Object.entries(settings).map(([option, value]) => `${option.replace(/_/g, " ")} ${value}`);
+  return given.length ? ` (${given.join(", ")})` : "";
+}
+
 function renderJob(job) {
   page.job = job;
   byId("job-title").textContent = job.name;
+  byId("job-description").textContent = job.description || "";
+  byId("job-description").hidden = !job.description;
   const status = byId("status");
   status.textContent = job.status + (job.stop_requested && !Slip.TRAINING_ENDED.includes(job.status) ? " (stopping)" : "");
   status.dataset.status = job.status;
   status.className = "badge status-" + job.status;
   const facts = [
     `${job.track} (${job.direction || "file's direction"})`,
-    job.race_type.replace(/_/g, " "),
+    job.race_type.replace(/_/g, " ") + raceSettingsText(job.race_settings),
     `${job.compute_minutes.toFixed(1)} of ${job.minutes} min`,
     job.best_lap_ms ? `best evaluation lap ${Slip.ms(job.best_lap_ms)}` : null,
     job.recipe ? `recipe ${job.recipe}` : null,
@@ -177,16 +186,58 @@ async function follow() {
   }
 }
 
-// ---------------------------------------------------------------- evaluate and submit
+// ---------------------------------------------------------------- choose, evaluate and submit
+function showModel(id, what) {
+  page.modelId = id;
+  byId("model-link").replaceChildren(
+    "Evaluating and submitting ",
+    Slip.el("a", { href: `/models/${id}` }, `model ${id}`),
+    ` (${what}).`,
+  );
+}
+
+async function loadCheckpoints() {
+  const answer = await Slip.api(`/api/training-jobs/${page.jobId}/checkpoints`);
+  const form = byId("checkpoint-form");
+  form.hidden = !answer.ok || !answer.body.length;
+  if (form.hidden) return;
+  const rows = answer.body.map((c) => {
+    const id = `checkpoint-${c.name}`;
+    const choice = Slip.el("input", { type: "radio", name: "checkpoint", id, value: c.name, checked: c.model_id === page.modelId });
+    return Slip.el(
+      "tr",
+      { "data-checkpoint": c.name },
+      Slip.el("td", {}, choice, " ", Slip.el("label", { for: id }, c.by)),
+      Slip.el("td", {}, c.iteration),
+      Slip.el("td", {}, `${c.minutes.toFixed(1)} min`),
+      Slip.el("td", {}, c.completion === null ? "—" : `${c.completion.toFixed(0)}%`),
+      Slip.el("td", {}, c.best_lap ? Slip.ms(c.best_lap * 1000) : "—"),
+      Slip.el("td", {}, c.model_id ? Slip.el("a", { href: `/models/${c.model_id}` }, `model ${c.model_id}`) : "not yet"),
+    );
+  });
+  byId("checkpoints").tBodies[0].replaceChildren(...rows);
+}
+
+byId("checkpoint-form").addEventListener("submit", async (e) => {
+  e.preventDefault();
+  const chosen = byId("checkpoint-form").querySelector("input[name=checkpoint]:checked");
+  if (!chosen) return Slip.say("checkpoint-result", "Choose a checkpoint first.", "error");
+  Slip.say("checkpoint-result", "Validating the checkpoint's model…", "");
+  const answer = await Slip.api(`/api/training-jobs/${page.jobId}/checkpoints/${chosen.value}/model`, { method: "POST" });
+  if (!answer.ok) return Slip.say("checkpoint-result", Slip.errorText(answer), "error");
+  const what = chosen.labels[0].textContent;
+  showModel(answer.body.id, `the checkpoint of the ${what}`);
+  Slip.say("checkpoint-result", `Model ${answer.body.id} holds the checkpoint of the ${what}.`, "ok");
+  loadCheckpoints();
+  loadEvaluations();
+});
+
 async function showModelActions(job) {
   const section = byId("model-actions");
   if (!section.hidden) return;
   section.hidden = false;
-  byId("model-link").replaceChildren(
-    "The job's model: ",
-    Slip.el("a", { href: `/models/${job.model_id}` }, `model ${job.model_id}`),
-    " (its best evaluation's weights).",
-  );
+  showModel(job.model_id, "the job's model: its best evaluation's weights");
+  loadCheckpoints();
   const [catalogue, events] = await Promise.all([Slip.api("/api/garage/catalogue"), Slip.api("/api/events")]);
   if (catalogue.ok) {
     byId("evaluate-track").replaceChildren(
@@ -204,7 +255,7 @@ async function showModelActions(job) {
 }
 
 async function loadEvaluations() {
-  const answer = await Slip.api(`/api/models/${page.job.model_id}/evaluations`);
+  const answer = await Slip.api(`/api/models/${page.modelId}/evaluations`);
   if (!answer.ok) return;
   const rows = answer.body.flatMap((ev) => {
     const races = ev.races.length ? ev.races : [null];
@@ -235,7 +286,7 @@ byId("evaluate-form").addEventListener("submit", async (e) => {
     laps: Number(byId("evaluate-laps").value),
   };
   Slip.say("evaluate-result", "Queuing the evaluation…", "");
-  const answer = await Slip.api(`/api/models/${page.job.model_id}/evaluations`, {
+  const answer = await Slip.api(`/api/models/${page.modelId}/evaluations`, {
     method: "POST",
     headers: { "Content-Type": "application/json" },
     body: JSON.stringify(body),
@@ -252,7 +303,7 @@ byId("submit-form").addEventListener("submit", async (e) => {
   const answer = await Slip.api(`/api/events/${eventId}/entries`, {
     method: "POST",
     headers: { "Content-Type": "application/json" },
-    body: JSON.stringify({ model_id: page.job.model_id }),
+    body: JSON.stringify({ model_id: page.modelId }),
   });
   if (!answer.ok) return Slip.say("submit-result", Slip.errorText(answer), "error");
   Slip.say("submit-result", "Entered. ", "ok", Slip.el("a", { href: `/events/${eventId}` }, "See the leaderboard"));
