@@ -109,21 +109,30 @@ def test_a_running_jobs_graph_grows_as_its_trainer_reports(page, league: League)
     assert page.is_hidden("#stop")
 
 
-def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submitted(
-    page, league: League, tmp_path: Path
-) -> None:
-    archives = {c.name: make_model_zip(tmp_path, 40 + i).read_bytes() for i, c in enumerate(KEPT)}
+def _job_with_run(
+    league: League, archives: dict[str, bytes], spec: dict | None = None
+) -> tuple[int, dict]:
+    """A done job whose stored run holds ``archives`` (checkpoint -> archive) as a job's
+    child packs them, its own model the ``best`` one; the job's id and that model."""
     members = {"models/index.json": checkpoint_index(KEPT)}
     members |= {f"models/{name}.zip": data for name, data in archives.items()}
     with league.client("alice") as alice:
         best = alice.post("/api/models", files={"file": ("best.zip", archives["best"])}).json()
     sha, _ = league.storage.put("runs", run_zip(members))
-    spec = {**SPEC, "options": {"race_type": "head_to_bot", "bots": 2}, "description": "bots"}
     job_id = _job(league, "done", [("status", {"status": "done", "error": None})], spec=spec)
     with league.sessions() as session:
         job = session.get_one(TrainingJob, job_id)
         job.model_id, job.run_sha256 = best["id"], sha
         session.commit()
+    return job_id, best
+
+
+def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submitted(
+    page, league: League, tmp_path: Path
+) -> None:
+    archives = {c.name: make_model_zip(tmp_path, 40 + i).read_bytes() for i, c in enumerate(KEPT)}
+    spec = {**SPEC, "options": {"race_type": "head_to_bot", "bots": 2}, "description": "bots"}
+    job_id, best = _job_with_run(league, archives, spec)
 
     console = watch_csp(page)
     sign_in(page, league, "alice")
@@ -149,3 +158,19 @@ def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submit
     )
     assert page.is_checked("#checkpoint-fastest")
     assert violations(page, console) == []
+
+
+def test_checkpoints_of_one_iteration_show_their_shared_model_chosen_once(
+    page, league: League, tmp_path: Path
+) -> None:
+    """The best and the fastest evaluation were the same one: one archive, one model."""
+    archives = {c.name: make_model_zip(tmp_path, 50 + i).read_bytes() for i, c in enumerate(KEPT)}
+    archives["fastest"] = archives["best"]
+    job_id, best = _job_with_run(league, archives)
+    sign_in(page, league, "alice")
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#checkpoints tr[data-checkpoint=fastest]")
+    for name in ("best", "fastest"):
+        link = page.get_attribute(f"#checkpoints tr[data-checkpoint={name}] a", "href")
+        assert link == f"/models/{best['id']}"
+    assert page.is_checked("#checkpoint-best") and not page.is_checked("#checkpoint-fastest")

@@ -200,10 +200,13 @@ async function loadCheckpoints() {
   const answer = await Slip.api(`/api/training-jobs/${page.jobId}/checkpoints`);
   const form = byId("checkpoint-form");
   form.hidden = !answer.ok || !answer.body.length;
+  if (!answer.ok) Slip.say("checkpoint-result", "The run's checkpoints cannot be listed: " + Slip.errorText(answer), "error");
   if (form.hidden) return;
-  const rows = answer.body.map((c) => {
+  // Checkpoints of one iteration share one model: the first of them is the one shown chosen.
+  const current = answer.body.findIndex((c) => c.model_id === page.modelId);
+  const rows = answer.body.map((c, i) => {
     const id = `checkpoint-${c.name}`;
-    const choice = Slip.el("input", { type: "radio", name: "checkpoint", id, value: c.name, checked: c.model_id === page.modelId });
+    const choice = Slip.el("input", { type: "radio", name: "checkpoint", id, value: c.name, checked: i === current });
     return Slip.el(
       "tr",
       { "data-checkpoint": c.name },
