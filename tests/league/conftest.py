@@ -150,13 +150,8 @@ class League:
 
 def start_league(database: Database, data_dir: Path, **overrides: object) -> Iterator[League]:
     """Migrate, create admin / alice / bob, serve; yield the league; stop the server."""
-    settings = Settings(
-        data_dir=data_dir,
-        database_url=database.url,
-        max_upload_bytes=UPLOAD_LIMIT,
-        rate_limit_per_second=0,
-        **overrides,
-    )
+    given = {"max_upload_bytes": UPLOAD_LIMIT, "rate_limit_per_second": 0, **overrides}
+    settings = Settings(data_dir=data_dir, database_url=database.url, **given)
     engine = make_engine(settings.db_url)
     upgrade(engine)
     sessions = make_session_factory(engine)

@@ -13,7 +13,6 @@ from pathlib import Path
 import pytest
 
 from league.models import Model, TrainingJob
-from league.settings import MiB
 from league.training.checkpoints import CheckpointOut
 from tests.league.conftest import Database, League, make_model_zip, start_league
 
@@ -62,11 +61,10 @@ def _job(league: League, name: str, members: dict[str, bytes] | None) -> int:
 @pytest.fixture(scope="module")
 def league(tmp_path_factory: pytest.TempPathFactory) -> Iterator[League]:
     """SQLite only: these routes read one job and one model query; what they exercise is
-    reading an untrusted run zip and the upload validator. A run folder may hold 1 MiB, so
-    a checkpoint archive past it is refused."""
+    reading an untrusted run zip and the upload validator."""
     folder = tmp_path_factory.mktemp("checkpoints-league")
     database = Database(f"sqlite:///{folder / 'league.db'}", "sqlite")
-    yield from start_league(database, folder / "data", training_disk_mb=1)
+    yield from start_league(database, folder / "data")
 
 
 @pytest.fixture(scope="module")
@@ -153,7 +151,7 @@ def test_a_lying_index_or_a_broken_archive_is_refused_without_a_model(
     garbage_index = _job(league, "garbage-index", {"models/index.json": b"[{'name': 1}]"})
     bomb = {
         "models/index.json": checkpoint_index(KEPT[:1]),
-        "models/best.zip": b"\0" * (league.settings.training_disk_mb * MiB + 1),
+        "models/best.zip": b"\0" * (league.settings.max_upload_bytes + 1),
     }
     broken = {
         "models/index.json": checkpoint_index(KEPT[2:]),

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from league.settings import MiB
 from tests.league.conftest import Database, League, start_league
 from tests.prerequisites import skip_or_fail
 from tests.web.data import Site, populate
@@ -35,10 +36,11 @@ SCREENSHOTS_ENV = "SLIPSTREAM_WEB_SCREENSHOTS"
 
 @pytest.fixture(scope="package")
 def league(tmp_path_factory: pytest.TempPathFactory) -> Iterator[League]:
-    """A running league on a fresh SQLite database."""
+    """A running league on a fresh SQLite database, whose uploads may be as large as a
+    trained camera model (the garage makes models of a run's checkpoints)."""
     folder = tmp_path_factory.mktemp("web")
     database = Database(f"sqlite:///{folder / 'league.db'}", "sqlite")
-    yield from start_league(database, folder / "data")
+    yield from start_league(database, folder / "data", max_upload_bytes=8 * MiB)
 
 
 @pytest.fixture(scope="package")

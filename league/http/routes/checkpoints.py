@@ -2,9 +2,8 @@
 model (by completion, by lap time, or the last), as DeepRacer racers choose a checkpoint.
 
 A job's own model is its ``best`` checkpoint; the run zip holds each checkpoint packed
-(:mod:`league.training.checkpoints`). Making one a model validates it as the trainer
-validates the job's own model: as an upload is, bounded by what a run folder may hold
-(``training_disk_mb``) rather than by the upload limit, which a camera network can pass.
+(:mod:`league.training.checkpoints`). Making one a model validates it as an upload is (and
+as the trainer validates the job's own model), under the upload limit.
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ from league.http.routes.training import JobId, visible_job
 from league.http.upload_validation import UploadValidator
 from league.models import Model, TrainingJob
 from league.schemas import ErrorOut, ModelOut
-from league.settings import MiB, Settings
+from league.settings import MiB
 from league.store.base import FileStore
 from league.training.checkpoints import (
     CheckpointMissing,
@@ -56,9 +55,9 @@ def _run_zip(job: TrainingJob, storage: FileStore) -> bytes:
     return storage.read("runs", job.run_sha256)
 
 
-def _archive(run_zip: bytes, job: TrainingJob, name: Which, settings: Settings) -> bytes:
+def _archive(run_zip: bytes, job: TrainingJob, name: Which, limit: int) -> bytes:
     try:
-        return checkpoint_archive(run_zip, name, settings.training_disk_mb * MiB)
+        return checkpoint_archive(run_zip, name, limit)
     except CheckpointMissing:
         raise HTTPException(404, f"Training job {job.id}'s run has no {name} checkpoint.") from None
     except ValueError as exc:
@@ -87,9 +86,8 @@ def read_checkpoints(
         kept = list_checkpoints(data)
     except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
-    digests = {
-        c.name: hashlib.sha256(_archive(data, job, c.name, settings)).hexdigest() for c in kept
-    }
+    bound = settings.training_disk_mb * MiB  # what the run folder could hold
+    digests = {c.name: hashlib.sha256(_archive(data, job, c.name, bound)).hexdigest() for c in kept}
     owned = select(Model.sha256, Model.id).where(
         Model.owner_id == job.owner_id, Model.sha256.in_(list(digests.values()))
     )
@@ -123,7 +121,7 @@ async def model_from_checkpoint(
     as an upload is; the same checkpoint twice gives the same model (200)."""
     job = await run_in_threadpool(visible_job, session, racer, job_id)
     run_zip = await run_in_threadpool(_run_zip, job, storage)
-    data = _archive(run_zip, job, name, settings)
+    data = _archive(run_zip, job, name, settings.max_upload_bytes)
     async with validation_slot(validator, racer.id):
         report = await validator.validate(data)
     model_name = f"{job.name[: 63 - len(name)]}-{name}"
