@@ -146,6 +146,14 @@ def test_create_a_model_validates_the_reward_and_builds_the_action_space(
     page.fill("[aria-label='Action 0 speed']", "0.5")
     spec = page.inner_text("#action-spec")
     assert spec.startswith("list:-30/0.5,-30/1.5,-15/0.75") and spec.count("/") == 10
+    # Dragged on the graph to straight ahead, three quarters of the way to the outer ring
+    # (the top speed, 1.5 m/s), action 0 drives straight at about 1.125 m/s; the table
+    # follows.
+    _drag_ahead(page, ".polar .polar-action[data-index='0']", 0.75)
+    steer = float(page.input_value("[aria-label='Action 0 steering angle']"))
+    speed = float(page.input_value("[aria-label='Action 0 speed']"))
+    assert abs(steer) <= 3 and abs(speed - 1.125) <= 0.1, (steer, speed)
+    assert page.inner_text("#action-spec").startswith(f"list:{steer:g}/{speed:g},-30/1.5")
 
     page.evaluate(f"text => {EDITOR}.setValue(text)", FIXED_REWARD)
     page.click("#validate")
@@ -174,7 +182,41 @@ def test_create_a_model_validates_the_reward_and_builds_the_action_space(
     page.check("#action-type-continuous")
     assert page.inner_text("#action-spec").startswith("continuous:")
     assert page.locator(".polar .polar-sector").count() == 1
+    # The sector's right-hand edge (the lowest steering angle) dragged to straight ahead.
+    _drag_ahead(page, ".polar .polar-handle[data-bound='steerLow']", 0.75)
+    low = float(page.input_value("#cont-steerLow"))
+    assert abs(low) <= 3, low
+    assert page.inner_text("#action-spec").startswith(f"continuous:{low:g}:30:")
     assert violations(page, console) == []
+
+
+def _ahead(page, fraction: float) -> tuple[float, float]:
+    """The page point straight ahead of the car, ``fraction`` of the way out along the
+    graph's straight-ahead ray (1: its outer ring, the graph's top speed)."""
+    return page.evaluate(
+        """(fraction) => {
+          const svg = document.querySelector('.polar');
+          const rays = Array.from(svg.querySelectorAll('.polar-ray'));
+          const ray = rays.find((l) => l.getAttribute('x1') === l.getAttribute('x2'));
+          const [x1, y1, x2, y2] = ['x1', 'y1', 'x2', 'y2'].map((k) => +ray.getAttribute(k));
+          const at = new DOMPoint(x1 + fraction * (x2 - x1), y1 + fraction * (y2 - y1));
+          const shown = at.matrixTransform(svg.getScreenCTM());
+          return [shown.x, shown.y];
+        }""",
+        fraction,
+    )
+
+
+def _drag_ahead(page, selector: str, fraction: float) -> None:
+    """Drag the element at ``selector`` with the mouse to straight ahead of the car (see
+    :func:`_ahead`), the graph scrolled into view first: the mouse acts in the viewport."""
+    page.locator(".polar").scroll_into_view_if_needed()
+    to = _ahead(page, fraction)
+    box = page.locator(selector).bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(*to, steps=8)
+    page.mouse.up()
 
 
 def _action_rows(page) -> list[list[str]]:

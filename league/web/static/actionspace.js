@@ -1,7 +1,7 @@
 // The action-space builder of /garage/new: DeepRacer's discrete builder (max steering,
 // steering granularity, max speed, speed granularity -> an editable table of actions) or a
 // continuous range, drawn as the console's polar graph (steering angle = angle, speed =
-// radius), producing the spec string a training job takes (agents/action_spaces.py):
+// radius), whose dots and sector edges can be dragged, producing the spec string a training job takes (agents/action_spaces.py):
 // console:MAX_STEER:STEER_GRAN:MAX_SPEED:SPEED_GRAN, list:STEER/SPEED,... or
 // continuous:STEER_LOW:STEER_HIGH:SPEED_LOW:SPEED_HIGH. The maths are pure functions.
 "use strict";
@@ -100,6 +100,18 @@ const SlipActions = {
     const r = (speed / geometry.topSpeed) * geometry.radius;
     return { x: geometry.cx - r * Math.sin(angle), y: geometry.cy - r * Math.cos(angle) };
   },
+
+  // The steering angle and speed at a point of the graph (the inverse of `point`), kept
+  // within the limits and rounded as the console rounds.
+  actionAt(x, y, geometry, lim) {
+    const clamp = (v, low, high) => Math.min(high, Math.max(low, v));
+    const steer = (Math.atan2(geometry.cx - x, geometry.cy - y) * 180) / Math.PI;
+    const speed = (Math.hypot(x - geometry.cx, y - geometry.cy) / geometry.radius) * geometry.topSpeed;
+    return {
+      steer: SlipActions.round2(clamp(steer, -lim.maxSteer, lim.maxSteer)),
+      speed: SlipActions.round2(clamp(speed, lim.minSpeed, lim.maxSpeed)),
+    };
+  },
 };
 
 const SVG_NS = "http://www.w3.org/2000/svg";
@@ -120,11 +132,20 @@ function sectorPath(steerLow, steerHigh, speedLow, speedHigh, g) {
   return `M${a.x},${a.y} A${R},${R} 0 ${large} 0 ${b.x},${b.y} L${c.x},${c.y} A${r},${r} 0 ${large} 1 ${d.x},${d.y} Z`;
 }
 
+// The continuous sector's drag handles: each moves one bound, from the middle of its edge.
+const SECTOR_HANDLES = {
+  steerLow: (c) => [c.steerLow, (c.speedLow + c.speedHigh) / 2],
+  steerHigh: (c) => [c.steerHigh, (c.speedLow + c.speedHigh) / 2],
+  speedLow: (c) => [(c.steerLow + c.steerHigh) / 2, c.speedLow],
+  speedHigh: (c) => [(c.steerLow + c.steerHigh) / 2, c.speedHigh],
+};
+
 // Draw a state as the console's polar graph into `svg` (discrete: one numbered dot per
-// action; continuous: the sector it covers).
-function drawPolar(svg, state, lim) {
+// action; continuous: the sector it covers, with a handle on each edge); `fixed` keeps the
+// scale of an earlier drawing (while dragging). Returns the geometry drawn with.
+function drawPolar(svg, state, lim, fixed = null) {
   const top = state.type === "continuous" ? state.continuous.speedHigh : Math.max(...state.actions.map((a) => a.speed));
-  const g = { cx: 160, cy: 192, radius: 135, topSpeed: top > 0 ? top : lim.maxSpeed };
+  const g = fixed || { cx: 160, cy: 192, radius: 135, topSpeed: top > 0 ? top : lim.maxSpeed };
   const parts = [];
   for (let k = 1; k <= 4; k++) {
     const r = (k / 4) * g.radius;
@@ -140,15 +161,21 @@ function drawPolar(svg, state, lim) {
   if (state.type === "continuous") {
     const c = state.continuous;
     parts.push(svgEl("path", { d: sectorPath(c.steerLow, c.steerHigh, c.speedLow, c.speedHigh, g), class: "polar-sector" }));
+    for (const [bound, where] of Object.entries(SECTOR_HANDLES)) {
+      const at = SlipActions.point(...where(c), g);
+      parts.push(svgEl("circle", { cx: at.x, cy: at.y, r: 7, class: "polar-handle", "data-bound": bound }));
+    }
   } else {
-    state.actions.forEach((a, i) => {
-      const at = SlipActions.point(a.steer, a.speed, g);
-      parts.push(svgEl("line", { x1: g.cx, y1: g.cy, x2: at.x, y2: at.y, class: "polar-arm" }));
+    const points = state.actions.map((a) => SlipActions.point(a.steer, a.speed, g));
+    // Every arm under every dot: an arm to a faster action crosses slower dots of its angle.
+    for (const at of points) parts.push(svgEl("line", { x1: g.cx, y1: g.cy, x2: at.x, y2: at.y, class: "polar-arm" }));
+    points.forEach((at, i) => {
       parts.push(svgEl("circle", { cx: at.x, cy: at.y, r: 9, class: "polar-action", "data-index": i }));
       parts.push(svgEl("text", { x: at.x, y: at.y + 4, class: "polar-number", "text-anchor": "middle" }, String(i)));
     });
   }
   svg.replaceChildren(...parts);
+  return g;
 }
 
 // A number input bound to `get`/`set` on the state.
@@ -202,12 +229,49 @@ SlipActions.builder = function builder(root, rawLimits, defaults, onChange) {
     render();
   });
 
+  let drag = null; // {geometry, index} or {geometry, bound} while a dot or handle is dragged
   const changed = (rebuildTable) => {
-    drawPolar(svg, state, lim);
+    drawPolar(svg, state, lim, drag && drag.geometry);
     specOut.textContent = SlipActions.specOf(state);
     if (rebuildTable) renderPanel();
     onChange(SlipActions.specOf(state));
   };
+
+  // Drag an action's dot (discrete) or an edge of the sector (continuous) on the graph;
+  // the table or the range fields follow. The scale holds still until the drag ends.
+  const graphPoint = (event) => {
+    const at = new DOMPoint(event.clientX, event.clientY).matrixTransform(svg.getScreenCTM().inverse());
+    return SlipActions.actionAt(at.x, at.y, drag.geometry, lim);
+  };
+  svg.addEventListener("pointerdown", (event) => {
+    const target = event.target;
+    if (!target.matches(".polar-action, .polar-handle")) return;
+    const geometry = drawPolar(svg, state, lim);
+    drag = target.dataset.bound ? { geometry, bound: target.dataset.bound } : { geometry, index: Number(target.dataset.index) };
+    svg.setPointerCapture(event.pointerId);
+    event.preventDefault();
+  });
+  svg.addEventListener("pointermove", (event) => {
+    if (!drag) return;
+    const { steer, speed } = graphPoint(event);
+    if (drag.bound) {
+      const c = state.continuous;
+      if (drag.bound === "steerLow") c.steerLow = Math.min(steer, c.steerHigh);
+      if (drag.bound === "steerHigh") c.steerHigh = Math.max(steer, c.steerLow);
+      if (drag.bound === "speedLow") c.speedLow = Math.min(speed, c.speedHigh);
+      if (drag.bound === "speedHigh") c.speedHigh = Math.max(speed, c.speedLow);
+    } else {
+      Object.assign(state.actions[drag.index], { steer, speed });
+    }
+    changed(true);
+  });
+  const endDrag = () => {
+    if (!drag) return;
+    drag = null;
+    changed(false);
+  };
+  svg.addEventListener("pointerup", endDrag);
+  svg.addEventListener("pointercancel", endDrag);
 
   const fromConsole = () => {
     const b = state.console;
