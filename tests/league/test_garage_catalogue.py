@@ -58,6 +58,7 @@ def test_the_catalogue_says_what_training_accepts(league: League) -> None:
     assert own["time_trial"] == {} and set(own["object_avoidance"]) == {"boxes"}
     bots = own["head_to_bot"]
     assert (bots["bots"]["default"], bots["bots"]["min"], bots["bots"]["max"]) == (3, 1, 6)
+    assert bots["bot_speed"]["help"] == "the bots' speed in m/s"  # the field's label
     # each is a training option, taken at its range's ends and refused past them
     for race_type, settings in own.items():
         for option, spec in settings.items():

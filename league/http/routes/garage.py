@@ -81,7 +81,9 @@ def _race_settings(race_type: str) -> list[dict[str, Any]]:
     for field, option in section.options.items():
         info = section.kind.model_fields[field]
         help_text = TrainSettings.model_fields[option].description or ""
-        row = {"option": option, "help": help_text.split(": ", 1)[-1], "default": info.default}
+        # "head_to_bot: the bots' speed in m/s (default 0.8)." -> "the bots' speed in m/s"
+        label = help_text.split(": ", 1)[-1].split(" (default")[0]
+        row = {"option": option, "help": label, "default": info.default}
         rows.append({**row, **_bounds(info)})
     return rows
 
