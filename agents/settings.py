@@ -9,6 +9,7 @@ start-up.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -143,21 +144,11 @@ class TrainSettings(BaseModel):
         return self
 
     def race_rules(self) -> dict[str, ObstacleConfig | BotConfig]:
-        """The race type's boxes or bots (:data:`RACE_SECTIONS`): these settings over the
-        league's defaults (ValueError for settings of another race type, or out of range)."""
-        rules: dict[str, ObstacleConfig | BotConfig] = {}
-        for race_type, section in RACE_SECTIONS.items():
-            given = {
-                field: getattr(self, option)
-                for field, option in section.options.items()
-                if getattr(self, option) is not None
-            }
-            if race_type == self.race_type:
-                rules[section.key] = section.build(given)
-            elif given:
-                names = ", ".join(section.options[field] for field in given)
-                raise ValueError(f"{names}: only {race_type} races have {section.key}")
-        return rules
+        """The race type's boxes or bots: these settings over the league's defaults
+        (:func:`race_rules`)."""
+        options = {o for section in RACE_SECTIONS.values() for o in section.options.values()}
+        given = {o: getattr(self, o) for o in options if getattr(self, o) is not None}
+        return race_rules(self.race_type, given)
 
     @property
     def preset(self) -> str:
@@ -219,6 +210,27 @@ RACE_SECTIONS = {
     ),
 }
 """The race types with settings of their own (boxes, bots), by race type."""
+
+
+def race_rules(race_type: str, given: Mapping[str, Any]) -> dict[str, ObstacleConfig | BotConfig]:
+    """The :class:`~arena.config.RaceConfig` section of ``race_type`` (``obstacles`` or
+    ``bots``; none for the others) from ``given`` settings (``boxes``, ``bots``,
+    ``bot_speed``, ...) over the league's defaults. ValueError, naming the settings, for
+    settings of another race type, unknown ones, or values out of range."""
+    rules: dict[str, ObstacleConfig | BotConfig] = {}
+    known: set[str] = set()
+    for kind, section in RACE_SECTIONS.items():
+        known |= set(section.options.values())
+        fields = {f: given[o] for f, o in section.options.items() if o in given}
+        if kind == race_type:
+            rules[section.key] = section.build(fields)
+        elif fields:
+            names = ", ".join(section.options[f] for f in fields)
+            raise ValueError(f"{names}: only {kind} races have {section.key}")
+    unknown = sorted(set(given) - known)
+    if unknown:
+        raise ValueError(f"{', '.join(unknown)}: not a race-type setting")
+    return rules
 
 
 def overlapped(sync: bool | None, device: str) -> bool:

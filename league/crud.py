@@ -15,7 +15,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from arena.config import BotConfig, ObstacleConfig
+from agents.settings import race_rules
 from league.jobs.queue import evaluation_jobs
 from league.models import Entry, Event, Job, Model, Race, RaceCar, Racer, utcnow
 from league.rulesets import event_config
@@ -130,9 +130,11 @@ def create_event(session: Session, spec: EventCreate, created_by: int | None) ->
 
 def evaluation_spec(model: Model, body: EvaluationCreate, now: datetime) -> EventCreate:
     """The unlisted event that evaluates ``model`` as ``body`` asks: the league's default
-    ruleset for the race type on that track and direction (the arena's default obstacles
-    or bots), seeds ``0 .. races-1``, open from ``now`` for :data:`EVALUATION_OPEN`
-    (``ValueError`` for an unknown track)."""
+    ruleset for the race type on that track and direction (its obstacles or bots: the
+    arena's defaults under ``body.race_settings``), seeds ``0 .. races-1``, open from
+    ``now`` for :data:`EVALUATION_OPEN` (``ValueError`` for an unknown track or a race
+    setting that does not fit)."""
+    rules = race_rules(body.race_type, body.race_settings)
     direction = body.direction or get_track(body.track).direction
     track_name = get_track(body.track, direction).display_name
     name = f"Evaluation: {model.name} on {track_name} ({direction})"
@@ -145,8 +147,7 @@ def evaluation_spec(model: Model, body: EvaluationCreate, now: datetime) -> Even
         seeds=list(range(body.races)),
         opens_at=now,
         closes_at=now + EVALUATION_OPEN,
-        obstacles=ObstacleConfig() if body.race_type == "object_avoidance" else None,
-        bots=BotConfig() if body.race_type == "head_to_bot" else None,
+        **rules,
     )
 
 

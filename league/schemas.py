@@ -214,7 +214,8 @@ EvaluationStatus = Literal["queued", "running", "done", "failed"]
 
 
 class EvaluationCreate(BaseModel):
-    """Evaluate one of your models alone on a track, under the league's default ruleset."""
+    """Evaluate one of your models alone on a track, under the league's default ruleset
+    (with the race type's own settings given)."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -223,6 +224,13 @@ class EvaluationCreate(BaseModel):
         default=None, description="ccw or cw; default: the way the track's file runs"
     )
     race_type: EvaluationRaceType = "time_trial"
+    race_settings: dict[str, float | int] = Field(
+        default_factory=dict,
+        max_length=8,
+        description="The race type's own settings over the league's defaults, as training "
+        'takes them: {"boxes": 3} for object avoidance; bots, bot_speed, '
+        "bot_lane_change_min_s, bot_lane_change_max_s for head-to-bot.",
+    )
     laps: int = Field(default=3, ge=1, le=5)
     races: int = Field(default=1, ge=1, le=3, description="Races, on seeds 0 .. races-1.")
 

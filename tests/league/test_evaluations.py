@@ -116,8 +116,11 @@ def test_an_evaluation_is_unlisted_private_and_takes_no_entries(evals_league: Le
     model = upload(league, "alice", seed=22, name="Quiet")["id"]
     other = upload(league, "bob", seed=23)["id"]
     body = {"track": "slipstream_speedway", "race_type": "head_to_bot", "laps": 2}
+    bots = {"bots": 2, "bot_speed": 1.2}  # the race type's own settings, as training takes them
     with league.client("alice") as alice:
-        created = alice.post(f"/api/models/{model}/evaluations", json=body).json()
+        created = alice.post(
+            f"/api/models/{model}/evaluations", json={**body, "race_settings": bots}
+        ).json()
         mine = alice.post(f"/api/events/{created['event_id']}/entries", json={"model_id": model})
     event_id = created["event_id"]
     assert created["direction"] == "ccw"  # the track file's own direction
@@ -142,6 +145,7 @@ def test_an_evaluation_is_unlisted_private_and_takes_no_entries(evals_league: Le
         close_events(session, utcnow() + timedelta(days=2))
         event = session.scalar(select(Event).where(Event.id == event_id))
         assert event is not None and event.kind == "evaluation" and event.finalized_at is None
+        assert (event.ruleset["bots"]["count"], event.ruleset["bots"]["speed"]) == (2, 1.2)
 
 
 @pytest.mark.parametrize(
@@ -152,6 +156,12 @@ def test_an_evaluation_is_unlisted_private_and_takes_no_entries(evals_league: Le
         ({"track": TRACK, "race_type": "head_to_model"}, "race_type"),
         ({"track": TRACK, "laps": 6}, "laps"),
         ({"track": TRACK, "races": 4}, "races"),
+        ({"track": TRACK, "race_settings": {"bots": 2}}, "bots: only head_to_bot races"),
+        (
+            {"track": TRACK, "race_type": "head_to_bot", "race_settings": {"bots": 9}},
+            "bots: Input should be less than or equal to 6",
+        ),
+        ({"track": TRACK, "race_settings": {"laps": 9}}, "laps: not a race-type setting"),
     ],
 )
 def test_a_bad_evaluation_is_refused_and_leaves_nothing(

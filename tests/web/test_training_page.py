@@ -8,7 +8,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from league.models import TrainingEvent, TrainingJob, utcnow
+from sqlalchemy import select
+
+from league.models import Entry, Event, TrainingEvent, TrainingJob, utcnow
 from tests.league.conftest import League, make_model_zip
 from tests.league.test_checkpoints import KEPT, checkpoint_index, run_zip
 from tests.web.test_browser import sign_in
@@ -157,6 +159,15 @@ def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submit
         f"#checkpoints tr[data-checkpoint=fastest] a[href='/models/{fastest['id']}']"
     )
     assert page.is_checked("#checkpoint-fastest")
+
+    # Evaluated, the chosen model races its job's race type with the job's own bots.
+    page.click("#evaluate")
+    page.wait_for_selector("#evaluate-result.ok")
+    with league.sessions() as session:
+        event = session.scalars(select(Event).where(Event.kind == "evaluation")).all()[-1]
+        entered = session.scalar(select(Entry.model_id).where(Entry.event_id == event.id))
+        assert (event.race_type, event.ruleset["bots"]["count"]) == ("head_to_bot", 2)
+        assert entered == fastest["id"]
     assert violations(page, console) == []
 
 

@@ -282,10 +282,13 @@ async function loadEvaluations() {
 
 byId("evaluate-form").addEventListener("submit", async (e) => {
   e.preventDefault();
+  // The job's race type with its own settings (boxes, bots); a head-to-model job alone.
+  const sameType = page.job.race_type !== "head_to_model";
   const body = {
     track: byId("evaluate-track").value,
     direction: byId("evaluate-direction").value,
-    race_type: page.job.race_type === "head_to_model" ? "time_trial" : page.job.race_type,
+    race_type: sameType ? page.job.race_type : "time_trial",
+    race_settings: sameType ? page.job.race_settings : {},
     laps: Number(byId("evaluate-laps").value),
   };
   Slip.say("evaluate-result", "Queuing the evaluation…", "");
