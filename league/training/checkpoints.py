@@ -43,18 +43,18 @@ class CheckpointMissing(LookupError):
 
 
 def _member(archive: zipfile.ZipFile, name: str, limit: int) -> bytes:
-    """The member ``name``, refused past ``limit`` bytes before it is decompressed."""
+    """The member ``name``, refused past ``limit`` bytes before it is decompressed (a
+    member never yields more than the size it declares: ``zipfile`` stops there)."""
     try:
         info = archive.getinfo(name)
     except KeyError:
         raise CheckpointMissing(name) from None
     if info.file_size > limit:
         raise ValueError(f"{name} is {info.file_size} bytes, over the limit of {limit}")
-    with archive.open(info) as member:
-        data = member.read(limit + 1)
-    if len(data) > limit:
-        raise ValueError(f"{name} is over the limit of {limit} bytes")
-    return data
+    try:
+        return archive.read(info)
+    except zipfile.BadZipFile as exc:
+        raise ValueError(f"{name} cannot be read: {exc}") from None
 
 
 def _open(run_zip: bytes) -> zipfile.ZipFile:

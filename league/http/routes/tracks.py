@@ -17,6 +17,10 @@ from tracks.catalog import NAME_PATTERN, get_track, track_version
 from tracks.track import TrackError
 
 router = APIRouter(prefix="/api/tracks", tags=["tracks"])
+TrackName = Annotated[str, Path(pattern=NAME_PATTERN.pattern)]
+DirectionQuery = Annotated[
+    Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
+]
 Point = tuple[float, float]
 
 
@@ -85,11 +89,9 @@ async def _per_version(
     responses={404: {"model": ErrorOut, "description": "No such track"}},
 )
 async def read_track(
-    name: Annotated[str, Path(pattern=NAME_PATTERN.pattern)],
+    name: TrackName,
     request: Request,
-    direction: Annotated[
-        Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
-    ] = None,
+    direction: DirectionQuery = None,
 ) -> Response:
     """The centre line (waypoints) and left / right borders of a built-in or imported track
     (ETag).
@@ -121,11 +123,9 @@ def _thumbnail(name: str, direction: Literal["ccw", "cw"] | None) -> Prepared:
     },
 )
 async def read_track_thumbnail(
-    name: Annotated[str, Path(pattern=NAME_PATTERN.pattern)],
+    name: TrackName,
     request: Request,
-    direction: Annotated[
-        Literal["ccw", "cw"] | None, Query(description="Race direction; default: the file's")
-    ] = None,
+    direction: DirectionQuery = None,
 ) -> Response:
     """The track's small SVG picture, as the event cards show it (ETag)."""
     return await _per_version(request, name, direction, _thumbnail)

@@ -77,16 +77,7 @@ const RewardGraph = {
       ctx.fillText(options.markerLabel || "model", sx(options.marker), H - pad.b - 6);
       ctx.restore();
     }
-    lines.forEach((line, n) => {
-      ctx.strokeStyle = ctx.fillStyle = line.color;
-      ctx.lineWidth = 2;
-      ctx.beginPath();
-      line.data.forEach(([x, y], i) => (i ? ctx.lineTo(sx(x), sy[line.axis](y)) : ctx.moveTo(sx(x), sy[line.axis](y))));
-      ctx.stroke();
-      if (line.dots) line.data.forEach(([x, y]) => ctx.fillRect(sx(x) - 3, sy[line.axis](y) - 3, 6, 6));
-      ctx.textAlign = "left";
-      ctx.fillText(line.label, pad.l + 10, pad.t + 14 + 16 * n);
-    });
+    lines.forEach((line, n) => RewardGraph.line(ctx, pad, n, line, sx, sy[line.axis], line.dots ? 6 : 0));
     canvas.dataset.points = String(reward.length);
     return true;
   },
@@ -114,15 +105,21 @@ const RewardGraph = {
     RewardGraph.axes(ctx, W, H, pad, [y0, y1], [x0, x1], xLabel);
     lines.forEach((line, n) => {
       const color = RewardGraph.COLORS[n % RewardGraph.COLORS.length];
-      ctx.strokeStyle = ctx.fillStyle = color;
-      ctx.lineWidth = 2;
-      ctx.beginPath();
-      line.data.forEach(([x, y], i) => (i ? ctx.lineTo(sx(x), sy(y)) : ctx.moveTo(sx(x), sy(y))));
-      ctx.stroke();
-      line.data.forEach(([x, y]) => ctx.fillRect(sx(x) - 2, sy(y) - 2, 4, 4));
-      ctx.textAlign = "left";
-      ctx.fillText(line.label, pad.l + 10, pad.t + 14 + 16 * n);
+      RewardGraph.line(ctx, pad, n, { ...line, color }, sx, sy, 4);
     });
     return true;
+  },
+
+  // One series as a line in its colour (dots of `dot` px when non-zero), with its label as
+  // the n-th legend row.
+  line(ctx, pad, n, line, sx, sy, dot) {
+    ctx.strokeStyle = ctx.fillStyle = line.color;
+    ctx.lineWidth = 2;
+    ctx.beginPath();
+    line.data.forEach(([x, y], i) => (i ? ctx.lineTo(sx(x), sy(y)) : ctx.moveTo(sx(x), sy(y))));
+    ctx.stroke();
+    if (dot) line.data.forEach(([x, y]) => ctx.fillRect(sx(x) - dot / 2, sy(y) - dot / 2, dot, dot));
+    ctx.textAlign = "left";
+    ctx.fillText(line.label, pad.l + 10, pad.t + 14 + 16 * n);
   },
 };
