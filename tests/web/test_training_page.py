@@ -161,8 +161,10 @@ def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submit
     assert page.is_checked("#checkpoint-fastest")
 
     # Evaluated, the chosen model races its job's race type with the job's own bots.
+    page.wait_for_selector("#evaluate-track option[value='slipstream_speedway']", state="attached")
     page.click("#evaluate")
-    page.wait_for_selector("#evaluate-result.ok")
+    page.wait_for_selector("#evaluate-result.ok, #evaluate-result.error")
+    assert "Queued" in page.inner_text("#evaluate-result"), page.inner_text("#evaluate-result")
     with league.sessions() as session:
         event = session.scalars(select(Event).where(Event.kind == "evaluation")).all()[-1]
         entered = session.scalar(select(Entry.model_id).where(Entry.event_id == event.id))
