@@ -407,7 +407,9 @@ class RacingEnv(ParallelEnv):
         points = np.array([snap.model_point for snap in snaps.values()])
         wheels = np.vstack([snap.wheel_points for snap in snaps.values()])
         on_road = self.track.contains(wheels).reshape(len(agents), 4)
+        any_on, all_on = on_road.any(axis=1).tolist(), on_road.all(axis=1).tolist()
         projection = self._projection_of(agents, points)
+        arcs, offsets = projection.arc_length.tolist(), projection.offset.tolist()
         contacts = self._contacts(agents)
         verdicts = {}
         for i, agent in enumerate(agents):
@@ -420,9 +422,9 @@ class RacingEnv(ParallelEnv):
             status = self._rules.update(
                 rec,
                 Measurement(
-                    arc=float(projection.arc_length[i]),
+                    arc=arcs[i],
                     moved=moved,
-                    any_wheel_on_track=bool(on_road[i].any()),
+                    any_wheel_on_track=any_on[i],
                     crashed=any(c.at_fault for c in mine),
                 ),
                 self.time,
@@ -438,7 +440,7 @@ class RacingEnv(ParallelEnv):
                 steps=rec.steps,
                 speed=live.command[1],
                 steering_angle=live.command[0],
-                all_wheels_on_track=bool(on_road[i].all()),
+                all_wheels_on_track=all_on[i],
                 is_offtrack=status == "off_track",
                 is_crashed=status == "crashed",
                 objects=self._objects_view(exclude=agent),
@@ -449,7 +451,7 @@ class RacingEnv(ParallelEnv):
                 params=params,
                 contacts=mine,
                 status=status,
-                offset=float(projection.offset[i]),
+                offset=offsets[i],
                 penalised=not was_frozen and rec.frozen,
                 released=was_frozen and not rec.frozen,
             )

@@ -222,7 +222,9 @@ class Lidar:
                 ]
             )[car, beam]
             angles = self.beam_angles[beam] + yaw[car]
-            dirs = np.stack([np.cos(angles), np.sin(angles), np.zeros(len(angles))], axis=1)
+            dirs = np.zeros((len(angles), 3))
+            np.cos(angles, out=dirs[:, 0])
+            np.sin(angles, out=dirs[:, 1])
             fraction = self._cast(origins[car], dirs, starts, car, excludes)
             hit[car, beam] = fraction < 1.0
             ranges[car, beam] = starts + fraction * (self.max_range - starts)
@@ -274,9 +276,14 @@ class Lidar:
         bodies, _, fractions, _, _ = zip(*results, strict=True)
         fraction = np.array(fractions)
         ids = np.array(bodies)
-        for n, bodies_of_car in enumerate(excludes):
-            for body in bodies_of_car:
-                fraction[(ids == body) & (car == n)] = 1.0
+        excluded = [(body, n) for n, bodies_of_car in enumerate(excludes) for body in bodies_of_car]
+        if excluded:
+            # ``ignored[body, n]``: car n does not see body. A miss's id, -1, reads the
+            # last row, which no body fills.
+            rows = max(int(ids.max()), max(body for body, _ in excluded)) + 2
+            ignored = np.zeros((rows, len(excludes)), dtype=bool)
+            ignored[tuple(np.array(excluded).T)] = True
+            fraction[ignored[ids, car]] = 1.0
         return fraction
 
     def _start_distances(

@@ -49,12 +49,12 @@ class ObjectsView:
     ) -> ObjectsView:
         """The view of objects at ``location`` ``(K, 2)`` whose centre-line projection is given."""
         return cls(
-            location=tuple((float(x), float(y)) for x, y in location),
-            heading_deg=tuple(float(h) for h in heading_deg),
-            speed=tuple(float(v) for v in speed),
-            left_of_center=tuple(bool(o > 0) for o in projection.offset),
-            distance=tuple(float(a) for a in projection.arc_length),
-            distance_from_center=tuple(float(d) for d in projection.distance_from_center),
+            location=tuple(map(tuple, np.asarray(location, dtype=float).tolist())),
+            heading_deg=tuple(np.asarray(heading_deg, dtype=float).tolist()),
+            speed=tuple(np.asarray(speed, dtype=float).tolist()),
+            left_of_center=tuple((projection.offset > 0).tolist()),
+            distance=tuple(projection.arc_length.tolist()),
+            distance_from_center=tuple(projection.distance_from_center.tolist()),
         )
 
     @classmethod

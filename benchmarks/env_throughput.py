@@ -4,7 +4,10 @@ Run: ``.venv/bin/python benchmarks/env_throughput.py [--steps N] [--repeats R]``
 process, so the figures are per core; each row is the run with the median step time of
 ``R`` runs (shared virtual machines vary by 10-20% from run to run). The "physics floor"
 row is the raw PyBullet cost of the same substeps with the same cars (no sensors, rules
-or params); each config's ratio to it shows what the rest of the step costs.
+or params), driving apart; each config's ratio to it shows what the rest of the step
+costs. "Physics in race" is the time the measured steps themselves spent in PyBullet's
+``stepSimulation`` (cars that bump and respawn cost more than the floor's): the ratio
+to it is the share of the step that is ours, on the same world.
 """
 
 from __future__ import annotations
@@ -28,8 +31,29 @@ CONFIGS = [
 ]
 
 
+class PhysicsClock:
+    """Times ``arena.world.step`` while installed: the physics of the very steps measured,
+    contacts and respawns included (the floor's cars drive apart and never touch)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self._step = world.step
+
+    def __enter__(self) -> PhysicsClock:
+        def timed(*args: object) -> None:
+            start = time.perf_counter()
+            self._step(*args)
+            self.seconds += time.perf_counter() - start
+
+        world.step = timed
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        world.step = self._step
+
+
 def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str, float]:
-    """Step a race with fixed mid-speed straight actions; reset whenever it ends."""
+    """Step a race with random discrete actions; reset whenever it ends."""
     race_type = "head_to_model" if num_cars > 1 else "time_trial"
     tracemalloc.start()
     env = arena.parallel_env(
@@ -41,14 +65,15 @@ def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str
     rng = np.random.default_rng(0)
     latencies = []
     agent_steps = 0
-    for _ in range(steps):
-        actions = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
-        start = time.perf_counter()
-        env.step(actions)
-        latencies.append(time.perf_counter() - start)
-        agent_steps += len(actions)
-        if not env.agents:
-            env.reset()
+    with PhysicsClock() as physics:
+        for _ in range(steps):
+            actions = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+            start = time.perf_counter()
+            env.step(actions)
+            latencies.append(time.perf_counter() - start)
+            agent_steps += len(actions)
+            if not env.agents:
+                env.reset()
     env.close()
     times = summary(latencies)
     return {
@@ -56,6 +81,7 @@ def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str
         "p50_ms": 1e3 * times.median,
         "p99_ms": 1e3 * times.p99,
         "step_ms": 1e3 * times.mean,
+        "physics_ms": 1e3 * physics.seconds / steps,
         "mem_mb": peak / 2**20,
     }
 
@@ -75,6 +101,8 @@ def main() -> None:
         "p50 ms",
         "p99 ms",
         "x physics floor",
+        "physics ms (in race)",
+        "x physics in race",
         "env alloc MB",
     )
     table = ResultTable(title, columns)
@@ -89,6 +117,8 @@ def main() -> None:
             "",
             "",
             "1.0",
+            "",
+            "",
             "",
         )
     for name, cars, sensors in CONFIGS:
@@ -105,6 +135,8 @@ def main() -> None:
             f"{m['p50_ms']:.2f}",
             f"{m['p99_ms']:.2f}",
             f"{m['step_ms'] / (1e3 * floors[cars]):.1f}",
+            f"{m['physics_ms']:.2f}",
+            f"{m['step_ms'] / m['physics_ms']:.1f}",
             f"{m['mem_mb']:.1f}",
         )
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

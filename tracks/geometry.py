@@ -55,12 +55,21 @@ def cumulative_length(vertices: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Segments:
-    """A polyline's segments ``a -> a + d``, precomputed for repeated projections."""
+    """A polyline's segments ``a -> a + d``, precomputed for repeated projections.
+
+    The coordinates are kept as separate contiguous columns (``ax``, ``ay``, ``dx``,
+    ``dy``): a projection of a few points is then a handful of small array operations.
+    """
 
     a: np.ndarray
     d: np.ndarray
     length2: np.ndarray
     cum_length: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+    dx: np.ndarray
+    dy: np.ndarray
+    safe_length2: np.ndarray
 
     @classmethod
     def of(cls, vertices: np.ndarray, cum_length: np.ndarray | None = None) -> Segments:
@@ -68,7 +77,11 @@ class Segments:
         d = vertices[1:] - vertices[:-1]
         if cum_length is None:
             cum_length = cumulative_length(vertices)
-        return cls(vertices[:-1], d, np.einsum("ij,ij->i", d, d), cum_length)
+        a = vertices[:-1]
+        length2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+        columns = (a[:, 0], a[:, 1], d[:, 0], d[:, 1])
+        ax, ay, dx, dy = (np.ascontiguousarray(c) for c in columns)
+        return cls(a, d, length2, cum_length, ax, ay, dx, dy, np.maximum(length2, EPS))
 
 
 def project_onto_polyline(
@@ -85,21 +98,29 @@ def project_onto_polyline(
 def project_onto_segments(points: np.ndarray, segments: Segments) -> PolylineProjection:
     """:func:`project_onto_polyline` with the polyline's segments computed beforehand."""
     pts = as_points(points)
-    a, d, seg_len2 = segments.a, segments.d, segments.length2
-    rel = pts[:, None, :] - a[None, :, :]
-    t = np.einsum("psk,sk->ps", rel, d) / np.maximum(seg_len2, EPS)
-    np.clip(t, 0.0, 1.0, out=t)
-    diff = rel - t[..., None] * d[None, :, :]
-    dist2 = np.einsum("psk,psk->ps", diff, diff)
-    seg = np.argmin(dist2, axis=1)
+    px, py = pts[:, 0:1], pts[:, 1:2]
+    rx = px - segments.ax
+    ry = py - segments.ay
+    t = rx * segments.dx
+    t += ry * segments.dy
+    t /= segments.safe_length2
+    np.maximum(t, 0.0, out=t)
+    np.minimum(t, 1.0, out=t)
+    rx -= t * segments.dx
+    ry -= t * segments.dy
+    rx *= rx
+    ry *= ry
+    dist2 = rx
+    dist2 += ry
+    seg = dist2.argmin(axis=1)
     rows = np.arange(len(pts))
     frac = t[rows, seg]
-    seg_d = d[seg]
-    closest = a[seg] + frac[:, None] * seg_d
-    seg_len = np.sqrt(seg_len2[seg])
-    arc = segments.cum_length[seg] + frac * seg_len
-    to_point = pts - closest
-    cross = seg_d[:, 0] * to_point[:, 1] - seg_d[:, 1] * to_point[:, 0]
+    seg_dx, seg_dy = segments.dx[seg], segments.dy[seg]
+    closest = np.empty_like(pts)
+    closest[:, 0] = segments.ax[seg] + frac * seg_dx
+    closest[:, 1] = segments.ay[seg] + frac * seg_dy
+    arc = segments.cum_length[seg] + frac * np.sqrt(segments.length2[seg])
+    cross = seg_dx * (pts[:, 1] - closest[:, 1]) - seg_dy * (pts[:, 0] - closest[:, 0])
     distance = np.sqrt(dist2[rows, seg])
     offset = np.where(cross >= 0.0, distance, -distance)
     return PolylineProjection(seg, frac, arc, offset, distance, closest)
@@ -107,15 +128,29 @@ def project_onto_segments(points: np.ndarray, segments: Segments) -> PolylinePro
 
 @dataclass(frozen=True)
 class Edges:
-    """The edges ``a -> b`` of one or more closed rings, precomputed for inside tests."""
+    """The edges ``a -> b`` of one or more closed rings, precomputed for inside tests:
+    each edge's start ``ax``, ``ay``, end height ``by``, run ``dx`` and non-zero rise
+    ``rise`` (horizontal edges get ``EPS``; they never straddle a point's height)."""
 
-    a: np.ndarray
-    b: np.ndarray
+    ax: np.ndarray
+    ay: np.ndarray
+    by: np.ndarray
+    dx: np.ndarray
+    rise: np.ndarray
 
     @classmethod
     def of_rings(cls, rings: list[np.ndarray]) -> Edges:
         """Every ring's edges, the closing edge (last vertex back to the first) included."""
-        return cls(np.vstack(rings), np.vstack([np.roll(ring, -1, axis=0) for ring in rings]))
+        a = np.vstack(rings)
+        b = np.vstack([np.roll(ring, -1, axis=0) for ring in rings])
+        rise = b[:, 1] - a[:, 1]
+        return cls(
+            ax=np.ascontiguousarray(a[:, 0]),
+            ay=np.ascontiguousarray(a[:, 1]),
+            by=np.ascontiguousarray(b[:, 1]),
+            dx=b[:, 0] - a[:, 0],
+            rise=np.where(rise == 0.0, EPS, rise),
+        )
 
 
 def crossings(points: np.ndarray, ring: np.ndarray | Edges) -> np.ndarray:
@@ -127,14 +162,15 @@ def crossings(points: np.ndarray, ring: np.ndarray | Edges) -> np.ndarray:
     """
     edges = ring if isinstance(ring, Edges) else Edges.of_rings([ring])
     pts = as_points(points)
-    a, b = edges.a, edges.b
     px = pts[:, 0:1]
     py = pts[:, 1:2]
-    ay, by = a[None, :, 1], b[None, :, 1]
-    straddles = (ay > py) != (by > py)
-    denom = np.where(by - ay == 0.0, EPS, by - ay)
-    x_at = a[None, :, 0] + (py - ay) * (b[None, :, 0] - a[None, :, 0]) / denom
-    return np.count_nonzero(straddles & (px < x_at), axis=1)
+    straddles = (edges.ay > py) != (edges.by > py)
+    x_at = py - edges.ay
+    x_at *= edges.dx
+    x_at /= edges.rise
+    x_at += edges.ax
+    straddles &= px < x_at
+    return np.count_nonzero(straddles, axis=1)
 
 
 def inside_rings(points: np.ndarray, rings: list[np.ndarray] | Edges) -> np.ndarray:
