@@ -104,11 +104,12 @@ RECIPES: dict[str, Recipe] = {
         ),
         Recipe(
             name="head_to_model",
-            summary="needs --clone of a time_trial run; races a pool of its own snapshots and "
-            "that run's model, imitating the passing pursuit driver",
+            summary="slipstream_speedway (DeepRacer's width, room to pass); needs --clone of a "
+            "time_trial run; races a pool of its own snapshots and that run's model, "
+            "imitating the passing pursuit driver",
             options={
                 "race_type": "head_to_model",
-                "track": "beginner_loop",
+                "track": "slipstream_speedway",  # beginner_loop (0.76 m) leaves no room to pass
                 "sensors": "camera",  # the parent's: a clone needs its sensors and preset
                 "action_space": RACING_ACTIONS,  # and its number of actions
                 "reward_fn": "head_to_head",

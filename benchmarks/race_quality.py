@@ -8,12 +8,12 @@ the best evaluation lap and its ratio to the track's physical-limit lap (the rac
 of the simulated car, ``arena.pursuit.car_limits`` + ``tracks.raceline``, as
 ``slipstream tracks raceline`` reports it), and the off-tracks and collisions of the
 evaluation of the packed model (the run's best evaluation, whose weights ``model.zip``
-holds). ``head_to_model`` starts from the time-trial run
-(``clone``), trains against a pool of its own snapshots plus the time-trial model, and
-then races the time-trial parent :data:`H2M_RACES` seeded times: win rate (and the wins
-of the races it started in front and behind, and its mean margin at the finish in those
-it started behind), overtakes and at-fault collisions per race (the learner's,
-``arena.racing_metrics``).
+holds). ``head_to_model`` starts from the time-trial run (``clone``; trained on
+``head_to_model``'s track when both run), trains against a pool of its own snapshots plus
+the time-trial model, and then races the time-trial parent :data:`H2M_RACES` seeded
+times: win rate (and the wins of the races it started in front and behind, and its mean
+margin at the finish in those it started behind), overtakes and at-fault collisions per
+race (the learner's, ``arena.racing_metrics``).
 
 Run::
 
@@ -64,6 +64,9 @@ def settings_of(recipe: Recipe, args: argparse.Namespace, opponent: Path | None)
     }
     if args.workers is not None:
         given["workers"] = args.workers
+    children = [RECIPES[n] for n in args.only if RECIPES[n].parent == recipe.name]
+    if children:  # a parent trains where its child races it
+        given["track"] = children[0].options["track"]
     if opponent is not None:
         given["opponent"] = [opponent]
     return recipe.settings(given)
@@ -248,7 +251,7 @@ def cells(row: dict) -> list[str]:
 
 def title(args: argparse.Namespace) -> str:
     """The table's title."""
-    tracks = sorted({RECIPES[n].options["track"] for n in args.only})
+    tracks = sorted({settings_of(RECIPES[n], args, None).track for n in args.only})
     limits = ", ".join(f"{t} {physical_limit_lap(t):.2f} s" for t in tracks)
     return (
         f"race quality after {args.minutes:g} min per race type, {args.critic} critic "
