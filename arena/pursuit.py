@@ -14,7 +14,9 @@ and is the teacher that imitation learning copies.
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -192,38 +194,129 @@ BOX_CLEARANCE_M = 0.6
 CAR_CLEARANCE_M = 0.32
 MOVING_MPS = 0.1
 PASS_EDGE_MARGIN_M = 0.06
-# The highest speed asked for while steering around an object (a tighter, steadier line).
+# Closer than this across the track (centre to centre), a standing object is in the car's
+# path: half a box's width (0.25 m) and half the car's (0.1 m).
+ON_COURSE_M = 0.35
+# The shortest pursuit distance when aiming beside such an object close ahead (about a car
+# length: shorter, the pursuit steers at full lock for any error).
+MIN_AIM_M = 0.3
+# The highest speed asked for while steering around a box (a tighter, steadier line).
 PASS_SPEED = 2.0
-# Off the racing line by more than this (after a pass), the car rejoins it at PASS_SPEED
-# (the lagging steering strays up to about 0.2 m from the line with nothing to pass).
+# Off the racing line by more than this after passing a box, the car rejoins it at
+# PASS_SPEED (the lagging steering strays up to about 0.2 m from the line with nothing to
+# pass); after a car it rejoins at the speed it holds on the arc it steers (slowing to
+# PASS_SPEED handed the place back to the car just passed).
 REJOIN_M = 0.25
 # A car ahead is passed on the far side only when it is at least this far ahead (else the
-# pass would cut across its nose): closer, the car follows it on its own side.
+# pass would cut across its nose): closer, the car passes on its own side or follows.
 CROSS_GAP_M = 1.5
 FOLLOW_MIN_SPEED = 0.5  # DeepRacer's lowest speed
-# A moving car ahead is passed, at the speed profile's speed, when it drives slower than
-# PASS_PACE of the pace its place on the line allows (the profile's lowest speed over the
-# PACE_WINDOW_M of line up to it: leaving a corner, a car at full pace is still
-# accelerating), so that the pass gains time; one at that pace or faster, and any car in
-# the first START_FOLLOW_STEPS control steps (2 s: from a standing start both cars
-# accelerate alike, and a pass crosses the leader's nose), is as fast as this one: the car
-# follows it on the racing line instead, closing to FOLLOW_GAP_M (centre to centre along
-# the track) at
-# FOLLOW_GAIN m/s per metre of gap error, and never faster than lets it brake at the car's
-# braking limit, after FOLLOW_REACTION_S (three control steps: with one, the follower
-# ran into the leader once a race on the lagging car), to the leader's speed before the
-# gap falls to FOLLOW_MIN_GAP_M (the car's length and a few centimetres; Gipps' rule).
-# Head-to-head laps are timed from each car's own grid slot, so a car that ends the race
-# closer behind than it started wins: following a racing car wins more races than passing
-# it, and the braking cap keeps the follower off a leader that brakes hard
-# (benchmarks/RESULTS.md, "Following instead of passing").
-PASS_PACE = 0.9
-PACE_WINDOW_M = 1.0
+CONTROL_DT = 1.0 / 15.0  # DeepRacer's control step (s)
+
+# Whether to pass a car is decided from closing speed, gap and room (_pass_completes): the
+# car plays the pass forward, itself at its profile's speed (PASS_LINE_SHARE of it: off
+# the line it drives a longer, tighter path) and the rival at what it has shown it drives,
+# and passes only when it gets PASS_CLEAR_M ahead (centre to centre: a car length and a
+# quarter metre, room to cut back in front) within PASS_PLAN_S, before the next corner
+# where the rival is the faster car hands the place back (a straight of the speedway is
+# about 2 s at full speed). The rival's speed there is the larger of its speed now and its
+# pace share times the profile's speed where it will be; its pace share is the lowest
+# ratio of its measured speed to the profile's over the last PACE_MEMORY_STEPS (1.5 s: a
+# corner and its exit), so a car of equal pace that brakes for a corner or accelerates out
+# of one is not taken for a slow one (that took a pass leaving every corner and lost 2 s
+# a race; RESULTS.md, "The gauntlet on real-width tracks"). In the first
+# START_FOLLOW_STEPS control steps (2 s: from a standing start both cars accelerate alike
+# and the pace share is not yet known) every car is followed.
+PASS_LINE_SHARE = 0.95
+PASS_CLEAR_M = 0.6
+PASS_PLAN_S = 3.0
+PACE_MEMORY_STEPS = 22
 START_FOLLOW_STEPS = 30
+# A pass under way goes on while it still gets ABORT_CLEAR_M ahead in the plan (less than
+# PASS_CLEAR_M, so that the decision does not flicker from step to step); once the car is
+# level with the rival it goes on regardless and holds its side.
+ABORT_CLEAR_M = 0.4
+# A car ahead crossing the track at more than HAZARD_ANGLE_DEG to it, fast enough to have
+# no wheel on the road within HAZARD_S, will be held for a penalty on its lane: it is
+# followed as a car that is about to stop (0.3 s and 25 deg: the paced follower swung off
+# the road at the start at 35 deg, and was rear-ended while held in half the races at 90%
+# pace; a racing car on the 0.76 m loop cuts from edge to edge, and taken for one leaving
+# the road it was followed 0.2 s a race slower).
+HAZARD_S = 0.3
+HAZARD_ANGLE_DEG = 25.0
+# Following (a car that cannot be passed): closing to FOLLOW_GAP_M (centre to centre along
+# the track) at FOLLOW_GAIN m/s per metre of gap error, and never faster than lets the car
+# brake at its braking limit, after FOLLOW_REACTION_S (three control steps: with one, the
+# follower ran into the leader once a race on the lagging car), to the leader's speed
+# before the gap falls to FOLLOW_MIN_GAP_M (the car's length and a few centimetres;
+# Gipps' rule). Head-to-head laps are timed from each car's own grid slot, so a car that
+# ends the race closer behind than it started wins: following a racing car wins more races
+# than a pass that cannot complete, and the braking cap keeps the follower off a leader
+# that brakes hard (benchmarks/RESULTS.md, "Following instead of passing").
 FOLLOW_GAP_M = 0.55
 FOLLOW_GAIN = 3.0
 FOLLOW_MIN_GAP_M = 0.35
 FOLLOW_REACTION_S = 0.2
+
+
+class _Interpolated:
+    """``np.interp`` of one function of the centre line's arc length at one point at a time
+    (as fast in pure Python as a pass plan calling it 90 times a step needs): samples
+    ``values`` at arc lengths ``arcs`` (sorted), periodic on a loop of length ``period``."""
+
+    def __init__(self, arcs: np.ndarray, values: np.ndarray, period: float | None) -> None:
+        xs, ys = arcs.tolist(), values.tolist()
+        if period is not None:  # np.interp's padding: one sample each side, wrapped
+            xs, ys = [xs[-1] - period, *xs, xs[0] + period], [ys[-1], *ys, ys[0]]
+        self._xs, self._ys, self._period = xs, ys, period
+
+    def __call__(self, arc: float) -> float:
+        """The interpolated value at ``arc``."""
+        xs, ys = self._xs, self._ys
+        x = arc % self._period if self._period is not None else arc
+        if x <= xs[0]:
+            return ys[0]
+        if x >= xs[-1]:
+            return ys[-1]
+        j = bisect.bisect_right(xs, x) - 1
+        slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+        return slope * (x - xs[j]) + ys[j]
+
+
+class _Seen:
+    """What the car saw of one other car over its last :data:`PACE_MEMORY_STEPS` steps:
+    its measured speed, its lateral offset (m, left positive) and its speed as a share of
+    the racing line's profile speed where it was."""
+
+    def __init__(self) -> None:
+        self.speeds: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
+        self.offsets: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
+        self.shares: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
+        self.is_car = False  # it was seen moving: a car, held for a penalty when it stands
+
+    def add(self, speed: float, offset: float, profile_speed: float) -> None:
+        """Record one step."""
+        self.speeds.append(speed)
+        self.is_car = self.is_car or speed > MOVING_MPS
+        self.offsets.append(offset)
+        self.shares.append(speed / max(profile_speed, FOLLOW_MIN_SPEED))
+
+    @property
+    def speed(self) -> float:
+        """Its speed now (m/s)."""
+        return self.speeds[-1]
+
+    @property
+    def pace_share(self) -> float:
+        """The lowest share of the profile's speed it drove at over the memory; 1.0 (as
+        fast as this car) until the memory is full."""
+        return min(self.shares) if len(self.shares) == self.shares.maxlen else 1.0
+
+    def lateral_speed(self) -> float:
+        """Its speed across the track over the last two steps (m/s, left positive)."""
+        if len(self.offsets) < 3:
+            return 0.0
+        return (self.offsets[-1] - self.offsets[-3]) / (2.0 * CONTROL_DT)
 
 
 class PassingPursuitPolicy(PurePursuitPolicy):
@@ -232,15 +325,17 @@ class PassingPursuitPolicy(PurePursuitPolicy):
     Boxes, bots and other cars come from the params (``objects_*``). When one lies within
     :data:`PASS_HORIZON_S` seconds (at least :data:`PASS_HORIZON_M` metres) ahead, or
     still beside the car, and the car's way from where it is to the racing line would pass
-    it closer than the clearance, the car aims beside it instead (past a box at most at
-    :data:`PASS_SPEED`, past a car at the profile's speed): on the side it is already on
-    when the track has room there, else on the far side. A car ahead that drives at
-    :data:`PASS_PACE` of its line's pace or faster is followed on the racing line instead
-    (:meth:`_follow_speed`). A car too close ahead to cross in front of (:data:`CROSS_GAP_M`) is
-    followed on this side at its speed until there is room. Off the line by more than
-    :data:`REJOIN_M`, it rejoins the line at most at :data:`PASS_SPEED`. On the line with
-    no object near it drives as :class:`PurePursuitPolicy`. It is the teacher that
-    ``slipstream train --teacher pursuit`` imitates.
+    it closer than the clearance, the car aims beside it instead: past a box at most at
+    :data:`PASS_SPEED` on the side it is on when the track has room there, else on the far
+    side. A car is passed, at the profile's speed, only when the pass completes
+    (:meth:`_pass_completes`: closing speed, gap and room), on the side with room at the
+    rival (:meth:`_pass_side`); a pass once begun is kept, on its side, until it no longer
+    completes while the car is still behind. Any other car is followed
+    (:meth:`_follow_speed`): on the racing line from behind, on its own side when level.
+    Off the line by more than :data:`REJOIN_M`, it rejoins the line at most at
+    :data:`PASS_SPEED`. On the line with no object near it drives as
+    :class:`PurePursuitPolicy`. It is the teacher that ``slipstream train --teacher
+    pursuit`` imitates.
     """
 
     def __init__(self, track: Track, *args: Any, **kwargs: Any) -> None:
@@ -248,35 +343,68 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         self.track = track
         where = track.project(self.line.points)
         order = np.argsort(where.arc_length)
-        self._line_arc = where.arc_length[order]
-        self._line_offset = where.offset[order]
+        arcs = where.arc_length[order]
+        period = track.length if track.is_loop else None
+        # The racing line's profile speed and lateral offset where the centre line is
+        # ``arc`` metres long.
+        self._profile_at = _Interpolated(arcs, self.line.speed[order], period)
+        self._line_offset_at = _Interpolated(arcs, where.offset[order], period)
         self._room = 0.5 * track.width - 0.5 * DEFAULT_CAR.width - PASS_EDGE_MARGIN_M
-        self._steps = 0
+        self.reset()
 
     def reset(self) -> None:
-        """Start of a race: also restart the count of steps since the start."""
+        """Start of a race: forget the steps, the cars seen and any pass under way."""
         super().reset()
         self._steps = 0
+        self._seen: dict[int, _Seen] = {}
+        self._last_arc: float | None = None
+        self._my_speed = 0.0
+        self._passing: int | None = None  # the object being passed
+        self._side = 0.0  # which side of it: 1 left, -1 right
+        self._after_box = False  # rejoining the line after a box (at PASS_SPEED)
 
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
         """The racing-line command, or one aimed beside an object in the way."""
         steer, speed = super().command_for(params)
         self._steps += 1
+        self._aim_within = math.inf
+        self._observe(params)
         way = self._way_past(params, speed)
         if way is None:
+            self._passing = None
             off_line = abs(_offset(params) - self._line_offset_at(params["projection_distance"]))
-            return steer, min(speed, PASS_SPEED) if off_line > REJOIN_M else speed
+            slow = self._after_box and off_line > REJOIN_M
+            self._after_box = slow
+            return steer, min(speed, PASS_SPEED) if slow else speed
         offset, most = way
         if offset is None:  # following a racing car, on the racing line
             return steer, min(speed, most)
         yaw, rear, distance = self._pursuit_geometry(
             params["x"], params["y"], params["heading"], min(params["speed"], most)
         )
-        arc = float(self.track.project(rear[None]).arc_length[0]) + distance
+        arc = float(self.track.project(rear[None]).arc_length[0]) + min(distance, self._aim_within)
         target, _ = self.track.pose_at(self.track.wrap_arc_length(arc), offset)
         wheelbase = self.limits.wheelbase_at(params["speed"])
         steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
         return steer, min(speed, most, self.arc_speed(steer, params["speed"]))
+
+    def _observe(self, params: dict[str, Any]) -> None:
+        """Update this car's measured speed (along the centre line) and what it saw of the
+        moving objects; forget them all when the list of objects changes (a car parked
+        or back from a penalty)."""
+        arc = float(params["projection_distance"])
+        if self._last_arc is not None:
+            self._my_speed = max(0.0, self.track.arc_delta(self._last_arc, arc) / CONTROL_DT)
+        self._last_arc = arc
+        count = len(params["objects_distance"])
+        if len(self._seen) != count or count == 0:
+            self._seen = {i: _Seen() for i in range(count)}
+            self._passing = None
+        for i, seen in self._seen.items():
+            side = 1.0 if params["objects_left_of_center"][i] else -1.0
+            offset = side * float(params["objects_distance_from_center"][i])
+            profile = self._profile_at(float(params["objects_distance"][i]))
+            seen.add(float(params["objects_speed"][i]), offset, profile)
 
     def _way_past(
         self, params: dict[str, Any], line_speed: float
@@ -295,61 +423,137 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         for i in np.argsort(gaps):
             if not -PASS_BESIDE_M <= gaps[i] <= horizon:
                 continue
-            side = 1.0 if params["objects_left_of_center"][i] else -1.0
-            obstacle = side * float(params["objects_distance_from_center"][i])
-            object_speed = float(params["objects_speed"][i])
-            clearance = CAR_CLEARANCE_M if object_speed > MOVING_MPS else BOX_CLEARANCE_M
+            obstacle = self._seen[int(i)].offsets[-1]
+            moving = float(params["objects_speed"][i]) > MOVING_MPS
+            clearance = CAR_CLEARANCE_M if moving else BOX_CLEARANCE_M
             # From where the car is to the line's offset at the object, all the way clear?
             low, high = sorted((here, self._line_offset_at(arc + gaps[i])))
             if max(low - obstacle, obstacle - high) >= clearance:
+                if self._passing == i and gaps[i] > 0.0:
+                    return here, line_speed  # beside it already: hold the side
                 continue
-            moving = object_speed > MOVING_MPS
-            if gaps[i] > 0.0 and moving and self._at_pace(object_speed, params, i):
-                return None, self._follow_speed(float(gaps[i]), object_speed, params["speed"])
-            pass_speed = line_speed if moving else PASS_SPEED
-            lean = 1.0 if low + high >= 2.0 * obstacle else -1.0
-            near_side, far_side = obstacle + lean * clearance, obstacle - lean * clearance
-            if abs(near_side) <= self._room:
-                return near_side, pass_speed
-            crossable = not moving or gaps[i] >= CROSS_GAP_M
-            if abs(far_side) <= self._room and crossable:
-                return far_side, pass_speed
-            follow = max(object_speed, FOLLOW_MIN_SPEED)
-            return float(np.clip(near_side, -self._room, self._room)), follow
+            if moving:
+                return self._past_car(int(i), float(gaps[i]), here, arc, line_speed)
+            clearance = CAR_CLEARANCE_M if self._seen[int(i)].is_car else BOX_CLEARANCE_M
+            return self._past_box(float(gaps[i]), obstacle, clearance, here, (low, high))
         return None
+
+    def _past_box(
+        self, gap: float, obstacle: float, clearance: float, here: float, way: tuple
+    ) -> tuple[float, float]:
+        """The way past a standing object (a box, or a car held for a penalty) ``gap``
+        metres ahead at lateral offset ``obstacle``, kept ``clearance`` from, the car's
+        way to the line spanning offsets ``way`` (low, high): beside it on the near side
+        when the track has room, else on the far side, at most at :data:`PASS_SPEED`.
+        While still in its path (:data:`ON_COURSE_M`) the car goes no faster than lets it
+        stop short of it, and aims beside it no further ahead than it is (the lookahead
+        at a crawl would steer too gently to get round it)."""
+        lean = 1.0 if sum(way) >= 2.0 * obstacle else -1.0
+        self._after_box = clearance == BOX_CLEARANCE_M
+        most = PASS_SPEED
+        if gap > 0.0 and abs(here - obstacle) < ON_COURSE_M:
+            most = min(most, self._follow_speed(gap, 0.0, self._my_speed))
+            self._aim_within = max(gap - MIN_AIM_M, MIN_AIM_M)
+        for side in (obstacle + lean * clearance, obstacle - lean * clearance):
+            if abs(side) <= self._room:
+                return side, most
+        near_side = obstacle + lean * clearance
+        return float(np.clip(near_side, -self._room, self._room)), FOLLOW_MIN_SPEED
+
+    def _past_car(
+        self, i: int, gap: float, here: float, arc: float, line_speed: float
+    ) -> tuple[float | None, float]:
+        """The way past car ``i``, ``gap`` metres ahead (negative: beside, behind the
+        car's centre) of this car at lateral offset ``here`` and arc length ``arc``: pass
+        it when the pass completes and there is room, else follow it."""
+        seen = self._seen[i]
+        if gap > 0.0 and self._leaving_road(seen):
+            self._passing = None
+            return None, self._follow_speed(gap, 0.0, self._my_speed)
+        side = self._pass_side(seen.offsets[-1], here, gap)
+        if side is not None and self._keeps_passing(i, gap, arc, seen):
+            self._passing, self._side = i, side
+            return seen.offsets[-1] + side * CAR_CLEARANCE_M, line_speed
+        self._passing = None
+        follow = self._follow_speed(max(gap, 0.0), seen.speed, self._my_speed)
+        if abs(here - seen.offsets[-1]) >= CAR_CLEARANCE_M and gap < DEFAULT_CAR.length:
+            # level with it (a pass given up): hold this side and drop back behind it
+            clear_side = 1.0 if here > seen.offsets[-1] else -1.0
+            aside = seen.offsets[-1] + clear_side * CAR_CLEARANCE_M
+            return float(np.clip(aside, -self._room, self._room)), min(line_speed, follow)
+        return None, follow
+
+    def _keeps_passing(self, i: int, gap: float, arc: float, seen: _Seen) -> bool:
+        """Whether to pass car ``i`` now: a pass under way goes on while it completes
+        with :data:`ABORT_CLEAR_M` (and always once level); a new one starts after the
+        start's :data:`START_FOLLOW_STEPS` when it completes with :data:`PASS_CLEAR_M`."""
+        if self._passing == i:
+            return gap <= 0.0 or self._pass_completes(arc, gap, seen, ABORT_CLEAR_M)
+        if self._steps <= START_FOLLOW_STEPS:
+            return False
+        return self._pass_completes(arc, gap, seen, PASS_CLEAR_M)
+
+    def _pass_completes(self, arc: float, gap: float, seen: _Seen, clear: float) -> bool:
+        """Whether this car, at arc length ``arc`` and ``gap`` metres behind a car it has
+        ``seen``, gets ``clear`` metres ahead of it within :data:`PASS_PLAN_S`.
+
+        Played forward a control step at a time along the centre line: this car at
+        :data:`PASS_LINE_SHARE` of its profile's speed, reached at its acceleration and
+        braking limits from its measured speed; the rival at the larger of its speed now
+        and its pace share of the profile's speed where it will be. A pass that reaches
+        a stretch where the rival is the faster car (the next corner: beside it, this
+        car is off its line and slower still) before it is clear does not complete.
+        """
+        limits = self.line.limits
+        mine, theirs = arc, arc + gap
+        speed, share, now = self._my_speed, seen.pace_share, seen.speed
+        for _ in range(round(PASS_PLAN_S / CONTROL_DT)):
+            wanted = PASS_LINE_SHARE * self._profile_at(mine)
+            rival_speed = max(now, share * self._profile_at(theirs))
+            if wanted < rival_speed:
+                return False  # a corner where the rival is the faster car comes first
+            change = wanted - speed
+            speed += min(max(change, -limits.max_brake * CONTROL_DT), limits.max_accel * CONTROL_DT)
+            mine += speed * CONTROL_DT
+            theirs += rival_speed * CONTROL_DT
+            if mine - theirs >= clear:
+                return True
+        return False
+
+    def _pass_side(self, rival: float, here: float, gap: float) -> float | None:
+        """The side (1 left, -1 right) to pass a car at lateral offset ``rival``: the one
+        under way if it still has room, else this car's own side when it has room, else
+        the far side when the car is far enough ahead to cross in front of
+        (:data:`CROSS_GAP_M`); None when neither has room."""
+
+        def fits(side: float) -> bool:
+            return abs(rival + side * CAR_CLEARANCE_M) <= self._room
+
+        if self._passing is not None and fits(self._side):
+            return self._side
+        own = 1.0 if here >= rival else -1.0
+        if fits(own):
+            return own
+        if fits(-own) and gap >= CROSS_GAP_M:
+            return -own
+        return None
+
+    def _leaving_road(self, seen: _Seen) -> bool:
+        """Whether the car ``seen`` is leaving the road: crossing the track at more than
+        :data:`HAZARD_ANGLE_DEG` to it, fast enough that within :data:`HAZARD_S` no wheel
+        will be on the road."""
+        lateral = seen.lateral_speed()
+        ahead = seen.offsets[-1] + HAZARD_S * lateral
+        steep = abs(lateral) > math.tan(math.radians(HAZARD_ANGLE_DEG)) * max(seen.speed, 0.1)
+        return steep and abs(ahead) > 0.5 * (self.track.width + DEFAULT_CAR.width)
 
     def _follow_speed(self, gap: float, leader_speed: float, speed: float) -> float:
         """The speed to follow a car ``gap`` metres ahead (centre to centre along the
-        track) that moves at ``leader_speed``; ``speed`` is this car's commanded speed."""
+        track) that moves at ``leader_speed``; ``speed`` is this car's speed."""
         closing = leader_speed + FOLLOW_GAIN * (gap - FOLLOW_GAP_M)
         room = gap - FOLLOW_MIN_GAP_M - FOLLOW_REACTION_S * speed
         braking = math.sqrt(max(0.0, leader_speed**2 + 2.0 * self.line.limits.max_brake * room))
         return max(FOLLOW_MIN_SPEED, min(closing, braking))
-
-    def _at_pace(self, speed: float, params: dict[str, Any], i: int) -> bool:
-        """Whether object ``i``, a car moving at ``speed``, is too fast to pass (and to be
-        followed instead): near its line's pace, or the race has just started."""
-        if self._steps <= START_FOLLOW_STEPS:
-            return True
-        return speed >= PASS_PACE * self._line_pace_near(params["objects_location"][i])
-
-    def _line_pace_near(self, point: Any) -> float:
-        """The lowest profile speed over the :data:`PACE_WINDOW_M` of racing line up to the
-        line point nearest ``point`` (x, y): what a car there at full pace drives at least
-        (leaving a corner it is still accelerating to the profile's speed)."""
-        line = self.line
-        spot = np.asarray(point, dtype=float)
-        nearest = int(np.argmin(np.sum((line.points - spot) ** 2, axis=1)))
-        here = float(line.arc_length[nearest])
-        back = here - PACE_WINDOW_M
-        back = back % line.length if line.is_loop else max(back, 0.0)
-        start = min(int(np.searchsorted(line.arc_length, back)), len(line.arc_length) - 1)
-        return self._slowest(start, here)
-
-    def _line_offset_at(self, arc: float) -> float:
-        """The racing line's lateral offset where the centre line is ``arc`` metres long."""
-        period = self.track.length if self.track.is_loop else None
-        return float(np.interp(arc, self._line_arc, self._line_offset, period=period))
 
 
 def _offset(params: dict[str, Any]) -> float:
