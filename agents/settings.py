@@ -82,6 +82,26 @@ class TrainSettings(BaseModel):
         "(pure pursuit on the racing line, steering around boxes and cars; "
         "agents.imitation). Clone the run to go on with PPO and the reward function.",
     )
+    anchor: Literal["pursuit"] | None = Field(
+        None,
+        description="PPO held near this driver at first: PPO's loss gains the distance of "
+        "the actor's action to the driver's, weighted --anchor-weight and decaying to 0 "
+        "over --anchor-iterations (agents.anchor). For PPO after imitation (--clone of a "
+        "--teacher run).",
+    )
+    anchor_weight: float = Field(
+        1.0, ge=0.0, description="The anchor's weight at the first update."
+    )
+    anchor_iterations: int = Field(
+        30, ge=1, description="Iterations over which the anchor's weight decays to 0."
+    )
+    critic_warmup: int | None = Field(
+        None,
+        ge=0,
+        description="Iterations at the start in which only PPO's critic learns, the actor "
+        "held. Default: 5 for a clone whose critic is not reused (an imitation run has "
+        "none), else 0.",
+    )
     seed: int = Field(0, description="Random seed.")
     workers: int | None = Field(
         None, description="Worker processes (default: CPU cores; 0: in-process)."
@@ -141,6 +161,15 @@ class TrainSettings(BaseModel):
     @model_validator(mode="after")
     def _race_settings_fit(self) -> TrainSettings:
         self.race_rules()
+        return self
+
+    @model_validator(mode="after")
+    def _anchor_needs_ppo(self) -> TrainSettings:
+        if self.anchor is not None and self.teacher is not None:
+            raise ValueError(
+                "--anchor holds PPO near a driver, and --teacher trains by imitation "
+                "without PPO: give one (clone a --teacher run to anchor its PPO)"
+            )
         return self
 
     def race_rules(self) -> dict[str, ObstacleConfig | BotConfig]:

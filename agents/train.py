@@ -19,6 +19,7 @@ import torch
 
 import arena
 from agents import evaluate, export, networks, plots
+from agents.anchor import anchored_config
 from agents.checkpoint import checkpoint, checkpoint_path, read_checkpoint, write_checkpoint
 from agents.deepracer_metrics import TrainingMetricsLog
 from agents.evaluate import EvalSummary
@@ -57,6 +58,8 @@ def _rank() -> int:
     return int(os.getenv("RANK", "0"))
 
 
+# PPO updates that train only the critic at the start of a clone whose critic is new.
+CLONE_CRITIC_WARMUP = 5
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """What stops training: Ctrl-C, ``kill`` / systemd / a container stop, a closed terminal."""
 
@@ -177,7 +180,7 @@ class Trainer:
             learner_cars=learners,
             device=s.device,
             privileged=s.critic == "privileged" and s.teacher is None,
-            expert=s.teacher is not None,
+            expert=s.teacher is not None or s.anchor is not None,
         )
         return env, pool
 
@@ -191,10 +194,39 @@ class Trainer:
         )
         if s.teacher is not None:
             cfg = imitation_config(cfg, s.discrete)
+        warmup = self._critic_warmup()
+        if s.anchor is not None or warmup:
+            anchored = s.anchor is not None
+            cfg = anchored_config(
+                cfg,
+                critic_warmup=warmup,
+                anchor_weight=s.anchor_weight if anchored else 0.0,
+                anchor_updates=s.anchor_iterations if anchored else 0,
+                discrete=s.discrete,
+            )
         log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None
         return RacingRunner(
             env, cfg, log_dir=log_dir, device=s.device, threads=s.threads, sync=not s.overlapped
         )
+
+    def _reuses_clone_critic(self) -> bool:
+        """Whether the clone's critic is loaded: it reads this run's inputs (an imitation
+        run has none)."""
+        clone = self.clone
+        return clone is not None and (
+            clone.settings.teacher is None and clone.settings.critic == self.settings.critic
+        )
+
+    def _critic_warmup(self) -> int:
+        """PPO updates in which only the critic learns: the setting, else
+        :data:`CLONE_CRITIC_WARMUP` for a clone whose critic is not reused."""
+        s = self.settings
+        if s.teacher is not None:
+            return 0
+        if s.critic_warmup is not None:
+            return s.critic_warmup
+        fresh = self.clone is not None and not self.resume and not self._reuses_clone_critic()
+        return CLONE_CRITIC_WARMUP if fresh else 0
 
     def _load_weights(self, runner: RacingRunner) -> None:
         if self.resume:
@@ -206,8 +238,7 @@ class Trainer:
             ckpt = self.clone.checkpoint(runner.device)
             # A critic that reads other inputs than this run's cannot be reused: a fresh one
             # (an imitation run has none).
-            same_critic = self.clone.settings.critic == self.settings.critic
-            same_critic = same_critic and "critic_state_dict" in ckpt
+            same_critic = self._reuses_clone_critic() and "critic_state_dict" in ckpt
             try:
                 runner.alg.load(ckpt, {"actor": True, "critic": same_critic}, strict=True)
             except RuntimeError as exc:

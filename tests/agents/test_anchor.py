@@ -1,0 +1,105 @@
+"""PPO after imitation (``agents.anchor``): the critic warms up with the actor held, and the
+anchor pulls the actor toward the teacher with a weight that decays to nothing."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from agents.action_spaces import parse_action_space_spec
+from agents.hyperparameters import Hyperparameters
+from agents.imitation import EXPERT_GROUP
+from agents.run import Run
+from agents.settings import TrainSettings
+from agents.train import CLONE_CRITIC_WARMUP, Trainer
+
+CONTINUOUS = parse_action_space_spec("continuous:-30:30:0.5:4")
+TINY = Hyperparameters(num_episodes_between_training=2, num_epochs=2, batch_size=64)
+QUICK = Hyperparameters(num_episodes_between_training=2, num_epochs=5, batch_size=64, lr=1e-3)
+BASE = {
+    "action_space": CONTINUOUS,
+    "sensors": ("lidar",),
+    "reward_fn": "pursuit",
+    "workers": 0,
+    "races": 1,
+    "steps_per_env": 128,
+    "eval_every": 1000,
+    "eval_time_limit": 5.0,
+}
+
+
+def _actor_weights(run) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in Run.load(run).actor().state_dict().items()}
+
+
+@pytest.fixture(scope="module")
+def taught(tmp_path_factory):
+    """A one-iteration imitation run of the pursuit driver."""
+    run = tmp_path_factory.mktemp("anchor") / "taught"
+    Trainer(TrainSettings(**BASE, teacher="pursuit", iterations=1), run, TINY).run()
+    return run
+
+
+def test_a_clone_of_an_imitation_run_warms_its_critic_up_by_default(taught, tmp_path):
+    ppo = TrainSettings(**BASE, iterations=1)
+    assert Trainer(ppo, tmp_path / "clone", TINY, clone=taught)._critic_warmup() == (
+        CLONE_CRITIC_WARMUP
+    )
+    assert Trainer(ppo, tmp_path / "fresh", TINY)._critic_warmup() == 0
+    told = TrainSettings(**BASE, iterations=1, critic_warmup=2)
+    assert Trainer(told, tmp_path / "told", TINY, clone=taught)._critic_warmup() == 2
+
+
+def test_the_actor_is_held_while_the_critic_warms_up_and_moves_after(taught, tmp_path):
+    parent = _actor_weights(taught)
+    held = TrainSettings(**BASE, iterations=2, critic_warmup=2)
+    result = Trainer(held, tmp_path / "held", TINY, clone=taught).run()
+    assert result.iterations == 2
+    after_warmup = _actor_weights(tmp_path / "held")
+    assert all(torch.equal(after_warmup[k], v) for k, v in parent.items())
+    critic = torch.load(tmp_path / "held" / "checkpoints" / "last.pt", weights_only=True)
+    assert "critic_state_dict" in critic
+
+    moved = TrainSettings(**BASE, iterations=1, critic_warmup=0)
+    Trainer(moved, tmp_path / "moved", TINY, clone=taught).run()
+    after = _actor_weights(tmp_path / "moved")
+    assert any(not torch.equal(after[k], v) for k, v in parent.items())
+
+
+def _distance_to_teacher(trainer: Trainer, iterations: int) -> tuple[list[float], float]:
+    """Train ``iterations`` iterations by hand; the anchor weights the updates used, and the
+    mean squared distance of the actor's action to the teacher's over the last rollout."""
+    env, _ = trainer._make_env()
+    try:
+        runner = trainer._make_runner(env)
+        runner.start()
+        weights = [runner.iteration(it).get("anchor_weight", 0.0) for it in range(iterations)]
+        observations = runner.alg.storage.observations.flatten(0, 1)
+        with torch.inference_mode():
+            actions = runner.alg.actor(observations)
+        distance = float(((actions - observations[EXPERT_GROUP]) ** 2).mean())
+    finally:
+        env.close()
+    return weights, distance
+
+
+def test_the_anchor_pulls_the_actor_to_the_teacher_with_a_decaying_weight(tmp_path):
+    """Measured: the anchored actor's distance to the teacher is 0.39-0.62 of PPO's alone
+    after 6 iterations (seeds 0-2)."""
+    torch.manual_seed(0)
+    anchored = TrainSettings(
+        **BASE, iterations=6, anchor="pursuit", anchor_weight=5.0, anchor_iterations=8
+    )
+    weights, near = _distance_to_teacher(Trainer(anchored, tmp_path / "a", QUICK), 6)
+    assert weights == pytest.approx([5.0, 4.375, 3.75, 3.125, 2.5, 1.875])
+    torch.manual_seed(0)
+    # Weight 0: PPO alone, on the same rollouts (the teacher's actions observed, unused).
+    plain = TrainSettings(**BASE, iterations=6, anchor="pursuit", anchor_weight=0.0)
+    weights, far = _distance_to_teacher(Trainer(plain, tmp_path / "p", QUICK), 6)
+    assert weights == [0.0] * 6
+    assert near < 0.8 * far, (near, far)
+
+
+def test_anchor_and_teacher_cannot_both_be_given():
+    with pytest.raises(ValueError, match="--anchor"):
+        TrainSettings(**BASE, teacher="pursuit", anchor="pursuit")
