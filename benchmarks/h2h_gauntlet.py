@@ -5,8 +5,9 @@ first laps alone (its solo lap: the mean over five time trials, penalties includ
 races two-car heats, ``--races`` seeded races per rival with the grid alternating (seeds
 0, 1, ...; on odd seeds the model starts in front):
 
-- a centre-line follower held to 60, 80, 90 and 100% of the model's solo pace (its mean
-  speed over the solo laps);
+- the pure-pursuit driver (``arena.pursuit.PurePursuitPolicy``: the racing line, braking
+  for its corners, no passing) with its speed profile scaled to 60, 80, 90 and 100% of the
+  model's solo pace (its mean speed over the solo laps), at most to its own pace;
 - each other model file of ``--field`` (default: the other sample models);
 - the scripted teacher (the passing pursuit driver, the league's bot).
 
@@ -33,8 +34,7 @@ from rich.progress import Progress
 
 from arena.actions import ContinuousActionSpace
 from arena.config import CarConfig, RaceConfig, SeedVariation, resolve_track
-from arena.drivers import LaneFollowerPolicy
-from arena.pursuit import PassingPursuitPolicy
+from arena.pursuit import PassingPursuitPolicy, PurePursuitPolicy
 from arena.race import RaceResult, StepGuard, run_race
 from league.jobs.evaluation import model_car
 from slipstream.race import rotated
@@ -45,6 +45,7 @@ SAMPLES = ROOT / "league" / "demo_models"
 PACES = (0.6, 0.8, 0.9, 1.0)
 DEEPRACER_WIDTH_M = 1.067
 ME, RIVAL = "model", "rival"
+SCRIPTED_ME = CarConfig(name=ME, action_space=ContinuousActionSpace())
 
 
 @dataclass
@@ -90,13 +91,18 @@ def model_heats(field: list[Path]) -> list[Heat]:
     return heats
 
 
-def rivals(track_name: str, pace: float, models: list[Heat]) -> list[Heat]:
-    """The field on one track: paced followers, the other models, the teacher."""
+def rivals(track_name: str, pace: float, rival_pace: float, models: list[Heat]) -> list[Heat]:
+    """The field on one track: the paced pursuit drivers (``rival_pace``: the pursuit
+    driver's own, m/s), the other models, the teacher."""
     track = get_track(track_name)
     scripted = CarConfig(name=RIVAL, action_space=ContinuousActionSpace())  # 0.5-4 m/s
     space = scripted.action_space
     heats = [
-        Heat(f"follower {p:.0%}", scripted, LaneFollowerPolicy(track, space, p * pace))
+        Heat(
+            f"pursuit {p:.0%}",
+            scripted,
+            PurePursuitPolicy(track, space, pace=min(1.0, p * pace / rival_pace)),
+        )
         for p in PACES
     ]
     heats += models
@@ -157,7 +163,7 @@ def main() -> None:
     if field is None:
         field = [p for p in sorted(SAMPLES.glob("*.zip")) if p.resolve() != args.model.resolve()]
     if args.teacher:
-        car = CarConfig(name=ME, action_space=ContinuousActionSpace())
+        car = SCRIPTED_ME
     else:
         model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
         car = model_car(ME, model.info.model_dump(mode="json"))
@@ -181,9 +187,14 @@ def main() -> None:
             table.notes.append(
                 f"{track}: solo lap {solo:.2f} s ({pace:.2f} m/s)"
                 if solo
-                else f"{track}: the model did not finish alone; followers paced at 1 m/s"
+                else f"{track}: the model did not finish alone; rivals paced at 1 m/s"
             )
-            heats = rivals(track, pace, others)
+            unpaced = PurePursuitPolicy(get_track(track), car.action_space)
+            rival_lap = solo_lap(unpaced, SCRIPTED_ME, track, args.laps)
+            rival_pace = length / rival_lap if rival_lap else pace
+            if rival_lap:
+                table.notes.append(f"{track}: the pursuit driver alone {rival_lap:.2f} s a lap")
+            heats = rivals(track, pace, rival_pace, others)
             task = progress.add_task(track, total=len(heats) * args.races)
             for heat in heats:
                 results = []
