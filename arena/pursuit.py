@@ -64,6 +64,8 @@ class PurePursuitPolicy:
         limits: the car limits the racing line and its speed profile are computed for.
         lookahead: pursuit distance in metres at standstill.
         lookahead_per_speed: extra pursuit distance per m/s of commanded speed (seconds).
+        pace: the share of the speed profile it drives at (0-1]: a slower racer on the
+            same line, braking for the same corners.
     """
 
     needs_params = True
@@ -75,9 +77,13 @@ class PurePursuitPolicy:
         limits: CarLimits = DEFAULT_LIMITS,
         lookahead: float = 0.7,
         lookahead_per_speed: float = 0.25,
+        pace: float = 1.0,
     ) -> None:
         if lookahead <= 0 or lookahead_per_speed < 0:
             raise ValueError("lookahead must be positive and lookahead_per_speed not negative")
+        if not 0.0 < pace <= 1.0:
+            raise ValueError(f"pace must be in (0, 1], got {pace}")
+        self.pace = pace
         self.space = action_space
         self.line = racing_line_for(track, limits)
         self.limits = limits
@@ -125,7 +131,8 @@ class PurePursuitPolicy:
 
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
         """``(steering_deg, speed)`` for the car that DeepRacer's ``params`` describe."""
-        return self.command(params["x"], params["y"], params["heading"], params["speed"])
+        steer, speed = self.command(params["x"], params["y"], params["heading"], params["speed"])
+        return steer, self.pace * speed
 
     def command(self, x: float, y: float, heading_deg: float, speed: float) -> tuple[float, float]:
         """``(steering_deg, speed)`` for a car whose model point is at ``(x, y)``."""

@@ -266,3 +266,20 @@ def test_passing_pursuit_rarely_runs_into_a_car_held_after_leaving_the_road() ->
         assert driver.laps == 1, seed
         at_fault += driver.at_fault_collisions
     assert at_fault <= 2
+
+
+def test_a_paced_pursuit_driver_laps_cleanly_that_much_slower() -> None:
+    """``pace`` scales the speed profile (the gauntlet's slower rivals): at 0.8 the driver
+    takes the same line, stays on the road and laps in about 1/0.8 of its full-pace time."""
+    track = get_track(SPEEDWAY)
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    laps = {}
+    for pace in (1.0, 0.8):
+        config = arena.make_config(track=SPEEDWAY, action_space=space, laps=2, seed=0)
+        driver = PurePursuitPolicy(track, space, pace=pace)
+        car = run_race(config, {"car0": driver}, record_trace=False).car("car0")
+        assert car.laps == 2 and car.off_track_count == 0, pace
+        laps[pace] = car.lap_times[1]
+    assert 1.15 < laps[0.8] / laps[1.0] < 1.3, laps
+    with pytest.raises(ValueError, match="pace"):
+        PurePursuitPolicy(track, space, pace=1.2)
