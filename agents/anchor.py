@@ -12,10 +12,12 @@ rollout move the actor far on them: measured, the clone kept its parent's laps f
 - **anchor**: each PPO mini-batch's loss gains an imitation term, the distance of the
   actor's action (the Gaussian mean, or the logits with cross-entropy) to the teacher's
   in the same states (the :data:`~agents.imitation.EXPERT_GROUP` observations), weighted
-  ``anchor_weight`` at the first update and decaying linearly to 0 over
-  ``anchor_updates`` updates; after that PPO alone decides, free to pass its teacher.
-  The term enters through rsl-rl's hook for an extra actor loss (its symmetry
-  extension's "mirror loss"), so it is part of the same gradient step as PPO's.
+  ``anchor_weight``; with ``anchor_updates`` the weight decays linearly to 0 over that
+  many updates, after which PPO alone decides. Measured, a weight that holds kept the
+  clone on the road while PPO made it faster; one that decayed over 30 updates let the
+  off-tracks come back once it was spent. The term enters through rsl-rl's hook for an
+  extra actor loss (its symmetry extension's "mirror loss"), so it is part of the same
+  gradient step as PPO's.
 
 The count of updates done is saved with the algorithm, so a resumed run goes on with the
 schedule where it stopped; a clone starts it again.
@@ -42,7 +44,7 @@ class AnchoredPPO(ReturnScaledPPO):
         *args: Any,
         critic_warmup: int = 0,
         anchor_weight: float = 0.0,
-        anchor_updates: int = 0,
+        anchor_updates: int | None = None,
         discrete: bool = False,
         **kwargs: Any,
     ) -> None:
@@ -54,10 +56,11 @@ class AnchoredPPO(ReturnScaledPPO):
         self.updates_done = 0
 
     def anchor_weight_now(self) -> float:
-        """The anchor's weight at the next update (0 once its schedule has run out)."""
-        if self.anchor_updates <= 0 or self.updates_done >= self.anchor_updates:
-            return 0.0
-        return self.anchor_weight * (1.0 - self.updates_done / self.anchor_updates)
+        """The anchor's weight at the next update (0 once a decay has run out)."""
+        if self.anchor_updates is None:
+            return self.anchor_weight
+        left = max(0.0, 1.0 - self.updates_done / self.anchor_updates)
+        return self.anchor_weight * left
 
     def update(self) -> dict[str, float]:
         """PPO's update with the anchor's term while it weighs, the actor held while the
@@ -118,7 +121,7 @@ def anchored_config(
     *,
     critic_warmup: int,
     anchor_weight: float,
-    anchor_updates: int,
+    anchor_updates: int | None,
     discrete: bool,
 ) -> dict[str, Any]:
     """rsl-rl's runner config ``ppo_cfg`` with :class:`AnchoredPPO` as its algorithm."""

@@ -84,16 +84,18 @@ class TrainSettings(BaseModel):
     )
     anchor: Literal["pursuit"] | None = Field(
         None,
-        description="PPO held near this driver at first: PPO's loss gains the distance of "
-        "the actor's action to the driver's, weighted --anchor-weight and decaying to 0 "
-        "over --anchor-iterations (agents.anchor). For PPO after imitation (--clone of a "
-        "--teacher run).",
+        description="PPO held near this driver: PPO's loss gains the distance of the "
+        "actor's action to the driver's, weighted --anchor-weight (agents.anchor). For PPO "
+        "after imitation (--clone of a --teacher run).",
     )
     anchor_weight: float = Field(
-        1.0, ge=0.0, description="The anchor's weight at the first update."
+        1.0, ge=0.0, description="The anchor's weight (at the first update, if it decays)."
     )
-    anchor_iterations: int = Field(
-        30, ge=1, description="Iterations over which the anchor's weight decays to 0."
+    anchor_iterations: int | None = Field(
+        None,
+        ge=1,
+        description="Iterations over which the anchor's weight decays linearly to 0 "
+        "(default: it holds).",
     )
     critic_warmup: int | None = Field(
         None,

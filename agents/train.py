@@ -201,7 +201,7 @@ class Trainer:
                 cfg,
                 critic_warmup=warmup,
                 anchor_weight=s.anchor_weight if anchored else 0.0,
-                anchor_updates=s.anchor_iterations if anchored else 0,
+                anchor_updates=s.anchor_iterations if anchored else None,
                 discrete=s.discrete,
             )
         log_dir = str(self.run_dir / "tensorboard") if self.writes_run_folder else None

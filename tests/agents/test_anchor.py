@@ -100,6 +100,12 @@ def test_the_anchor_pulls_the_actor_to_the_teacher_with_a_decaying_weight(tmp_pa
     assert near < 0.8 * far, (near, far)
 
 
+def test_the_anchor_holds_its_weight_unless_told_to_decay(tmp_path):
+    held = TrainSettings(**BASE, iterations=2, anchor="pursuit", anchor_weight=2.0)
+    weights, _ = _distance_to_teacher(Trainer(held, tmp_path / "h", TINY), 2)
+    assert weights == [2.0, 2.0]
+
+
 def test_anchor_and_teacher_cannot_both_be_given():
     with pytest.raises(ValueError, match="--anchor"):
         TrainSettings(**BASE, teacher="pursuit", anchor="pursuit")
