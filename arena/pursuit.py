@@ -24,7 +24,7 @@ import numpy as np
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.car_spec import DEFAULT_CAR, CarSpec
 from arena.drivers import SteeringLead, nearest_action, pursuit_steering
-from tracks.raceline import CarLimits, RacingLine, compute_racing_line
+from tracks.raceline import CarLimits, RacingLine, compute_racing_line, profile_path
 from tracks.track import Track
 
 
@@ -251,6 +251,23 @@ ABORT_CLEAR_M = 0.4
 # the road it was followed 0.2 s a race slower).
 HAZARD_S = 0.3
 HAZARD_ANGLE_DEG = 25.0
+# A car whose lateral offset stayed within ON_LINE_M of the racing line's (mean over the
+# memory) races the line: it brakes for the corners, takes their apexes and drives a
+# steady share of the profile's speed (the median share: a lagging car's share swings
+# 0.55-0.8 round a corner at 80% pace, and the lowest of them took it for a 55% car and
+# started passes into every corner). Such a car is passed along a lane CAR_CLEARANCE_M
+# beside the line (:class:`_Lane`), at that lane's own speed profile, and only where the
+# lane stays on the road while the cars overlap (the line runs along the edges, so one
+# side of it has no room at every apex and straight end). 0.15 m: the pursuit drivers
+# stray up to about 0.1 m from their line. Only on a track where a car fits beside one on
+# the centre line (room >= CAR_CLEARANCE_M: DeepRacer's 1.07 m, not the 0.76 m loop, where
+# the loop's lane-following bots stay within ON_LINE_M of the line and this rule ran into
+# them 16 times in 5 races against 10 before).
+ON_LINE_M = 0.15
+# Beside such a car the car aims this much wider than CAR_CLEARANCE_M: pursuit cuts a
+# corner's inside by about 0.1 m, and on the outside of the speedway's first corner at 60%
+# it closed to 0.2 m from the rival (centre to centre, the cars 0.196 m wide) and hit it.
+PURSUIT_CUT_M = 0.1
 # Following (a car that cannot be passed): closing to FOLLOW_GAP_M (centre to centre along
 # the track) at FOLLOW_GAIN m/s per metre of gap error, and never faster than lets the car
 # brake at its braking limit, after FOLLOW_REACTION_S (three control steps: with one, the
@@ -290,6 +307,49 @@ class _Interpolated:
         return slope * (x - xs[j]) + ys[j]
 
 
+def _stretch(track: Track, arcs: np.ndarray, path_arcs: np.ndarray) -> np.ndarray:
+    """Centre-line metres per metre driven along a path, at each of its points (forward
+    differences; ``arcs``: the points' centre-line arc lengths, ``path_arcs``: their arc
+    lengths along the path): above 1 on a corner's inside, below on its outside."""
+    along = np.atleast_1d(track.arc_delta(arcs[:-1], arcs[1:]))
+    ratio = along / np.maximum(np.diff(path_arcs), 1e-9)
+    return np.append(ratio, ratio[0] if track.is_loop else ratio[-1])
+
+
+class _Lane:
+    """The way past a car racing the racing line on one side of it (``side`` 1 left, -1
+    right): the line moved :data:`CAR_CLEARANCE_M` to that side, with its own speed
+    profile, on the road where it stays within ``room`` of the centre line. Functions of
+    the centre line's arc length (``arcs``, ``offsets``: the line's points projected onto
+    it, in line order)."""
+
+    def __init__(
+        self,
+        track: Track,
+        line: RacingLine,
+        arcs: np.ndarray,
+        offsets: np.ndarray,
+        side: float,
+        room: float,
+    ) -> None:
+        wanted = offsets + side * CAR_CLEARANCE_M
+        centre, heading = track.pose_at(arcs)
+        normal = np.stack([-np.sin(heading), np.cos(heading)], axis=-1)
+        points = centre + wanted[:, None] * normal  # unclipped: where it leaves the road
+        # the pass may not be alongside (``fits``), and clipping would kink the path
+        path = profile_path(points, line.limits, is_loop=line.is_loop)
+        order = np.argsort(arcs)
+        period = track.length if track.is_loop else None
+        stretch = _stretch(track, arcs, path.arc_length)
+        self.speed = _Interpolated(arcs[order], path.speed[order], period)
+        self.stretch = _Interpolated(arcs[order], stretch[order], period)
+        self._overflow = _Interpolated(arcs[order], np.abs(wanted[order]) - room, period)
+
+    def fits(self, arc: float) -> bool:
+        """Whether the lane beside the line is on the road at ``arc``."""
+        return self._overflow(arc) <= 0.0
+
+
 class _Seen:
     """What the car saw of one other car over its last :data:`PACE_MEMORY_STEPS` steps:
     its measured speed, its lateral offset (m, left positive) and its speed as a share of
@@ -299,13 +359,15 @@ class _Seen:
         self.speeds: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
         self.offsets: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
         self.shares: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
+        self.off_line: deque[float] = deque(maxlen=PACE_MEMORY_STEPS)
         self.is_car = False  # it was seen moving: a car, held for a penalty when it stands
 
-    def add(self, speed: float, offset: float, profile_speed: float) -> None:
-        """Record one step."""
+    def add(self, speed: float, offset: float, profile_speed: float, line_offset: float) -> None:
+        """Record one step (``line_offset``: the racing line's offset where the car is)."""
         self.speeds.append(speed)
         self.is_car = self.is_car or speed > MOVING_MPS
         self.offsets.append(offset)
+        self.off_line.append(abs(offset - line_offset))
         self.shares.append(speed / max(profile_speed, FOLLOW_MIN_SPEED))
 
     @property
@@ -318,6 +380,17 @@ class _Seen:
         """The lowest share of the profile's speed it drove at over the memory; 1.0 (as
         fast as this car) until the memory is full."""
         return min(self.shares) if len(self.shares) == self.shares.maxlen else 1.0
+
+    @property
+    def on_line(self) -> bool:
+        """Whether it races the racing line (:data:`ON_LINE_M`), over a full memory."""
+        full = len(self.off_line) == self.off_line.maxlen
+        return full and sum(self.off_line) / len(self.off_line) < ON_LINE_M
+
+    @property
+    def line_share(self) -> float:
+        """The median share of the profile's speed it drove at over the memory."""
+        return float(np.median(self.shares))
 
     def lateral_speed(self) -> float:
         """Its speed across the track over the last two steps (m/s, left positive)."""
@@ -337,7 +410,9 @@ class PassingPursuitPolicy(PurePursuitPolicy):
     side. A car is passed, at the profile's speed, only when the pass completes
     (:meth:`_pass_completes`: closing speed, gap and room), on the side with room at the
     rival (:meth:`_pass_side`); a pass once begun is kept, on its side, until it no longer
-    completes while the car is still behind. Any other car is followed
+    completes while the car is still behind. A car racing the racing line itself is
+    passed along a lane beside that line, only where the lane has room while the cars
+    overlap (:meth:`_lane_pass_completes`). Any other car is followed
     (:meth:`_follow_speed`): on the racing line from behind, on its own side when level.
     Off the line by more than :data:`REJOIN_M`, it rejoins the line at most at
     :data:`PASS_SPEED`. On the line with no object near it drives as
@@ -356,7 +431,13 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         # ``arc`` metres long.
         self._profile_at = _Interpolated(arcs, self.line.speed[order], period)
         self._line_offset_at = _Interpolated(arcs, where.offset[order], period)
+        stretch = _stretch(track, where.arc_length, self.line.arc_length)
+        self._line_stretch = _Interpolated(arcs, stretch[order], period)
         self._room = 0.5 * track.width - 0.5 * DEFAULT_CAR.width - PASS_EDGE_MARGIN_M
+        self._lanes = {
+            side: _Lane(track, self.line, where.arc_length, where.offset, side, self._room)
+            for side in (1.0, -1.0)
+        }
         self.reset()
 
     def reset(self) -> None:
@@ -410,8 +491,11 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         for i, seen in self._seen.items():
             side = 1.0 if params["objects_left_of_center"][i] else -1.0
             offset = side * float(params["objects_distance_from_center"][i])
-            profile = self._profile_at(float(params["objects_distance"][i]))
-            seen.add(float(params["objects_speed"][i]), offset, profile)
+            their_arc = float(params["objects_distance"][i])
+            profile = self._profile_at(their_arc)
+            seen.add(
+                float(params["objects_speed"][i]), offset, profile, self._line_offset_at(their_arc)
+            )
 
     def _way_past(
         self, params: dict[str, Any], line_speed: float
@@ -477,10 +561,18 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         if gap > 0.0 and self._leaving_road(seen):
             self._passing = None
             return None, self._follow_speed(gap, 0.0, self._my_speed)
-        side = self._pass_side(seen.offsets[-1], here, gap)
-        if side is not None and self._keeps_passing(i, gap, arc, seen):
-            self._passing, self._side = i, side
-            return seen.offsets[-1] + side * CAR_CLEARANCE_M, line_speed
+        if seen.on_line and self._room >= CAR_CLEARANCE_M:
+            side = self._racer_side(i, gap, here, arc, seen)
+            if side is not None:
+                self._passing, self._side = i, side
+                wide = CAR_CLEARANCE_M + PURSUIT_CUT_M
+                aside = float(np.clip(seen.offsets[-1] + side * wide, -self._room, self._room))
+                return aside, self._lanes[side].speed(arc)
+        else:
+            side = self._pass_side(seen.offsets[-1], here, gap)
+            if side is not None and self._keeps_passing(i, gap, arc, seen):
+                self._passing, self._side = i, side
+                return seen.offsets[-1] + side * CAR_CLEARANCE_M, line_speed
         self._passing = None
         follow = self._follow_speed(max(gap, 0.0), seen.speed, self._my_speed)
         if abs(here - seen.offsets[-1]) >= CAR_CLEARANCE_M and gap < DEFAULT_CAR.length:
@@ -523,6 +615,52 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             speed += min(max(change, -limits.max_brake * CONTROL_DT), limits.max_accel * CONTROL_DT)
             mine += speed * CONTROL_DT
             theirs += rival_speed * CONTROL_DT
+            if mine - theirs >= clear:
+                return True
+        return False
+
+    def _racer_side(self, i: int, gap: float, here: float, arc: float, seen: _Seen) -> float | None:
+        """The side (1 left, -1 right) to pass car ``i``, which races the racing line, or
+        None to follow it: a pass under way goes on, on its side, while it completes with
+        :data:`ABORT_CLEAR_M`; a new one starts after the start's :data:`START_FOLLOW_STEPS`
+        on a side where it completes with :data:`PASS_CLEAR_M`: this car's own side of the
+        rival, or either side from straight behind it (or :data:`CROSS_GAP_M` back)."""
+        if self._passing == i:
+            sides, clear = [self._side], ABORT_CLEAR_M
+        elif self._steps <= START_FOLLOW_STEPS:
+            return None
+        else:
+            own = 1.0 if here >= seen.offsets[-1] else -1.0
+            behind = abs(here - seen.offsets[-1]) < DEFAULT_CAR.width or gap >= CROSS_GAP_M
+            sides, clear = ([own, -own] if behind else [own]), PASS_CLEAR_M
+        for side in sides:
+            if self._lane_pass_completes(arc, gap, seen, self._lanes[side], clear):
+                return side
+        return None
+
+    def _lane_pass_completes(
+        self, arc: float, gap: float, seen: _Seen, lane: _Lane, clear: float
+    ) -> bool:
+        """Whether this car, at arc length ``arc`` and ``gap`` metres behind a car it has
+        ``seen`` racing the racing line, gets ``clear`` metres ahead of it along ``lane``
+        within :data:`PASS_PLAN_S`, the lane staying on the road while the cars overlap.
+
+        Played forward a control step at a time: this car at :data:`PASS_LINE_SHARE` of
+        the lane's profile speed, reached at its acceleration and braking limits from its
+        measured speed; the rival on the line at its median share of the line's profile
+        speed (:attr:`_Seen.line_share`). Each moves along the centre line at its speed
+        times its path's stretch (a corner's inside is shorter than its outside).
+        """
+        limits = self.line.limits
+        mine, theirs = arc, arc + gap
+        speed, share = self._my_speed, seen.line_share
+        for _ in range(round(PASS_PLAN_S / CONTROL_DT)):
+            if mine - theirs > -DEFAULT_CAR.length and not lane.fits(theirs):
+                return False  # alongside where the lane beside the rival leaves the road
+            change = PASS_LINE_SHARE * lane.speed(mine) - speed
+            speed += min(max(change, -limits.max_brake * CONTROL_DT), limits.max_accel * CONTROL_DT)
+            mine += speed * lane.stretch(mine) * CONTROL_DT
+            theirs += share * self._profile_at(theirs) * self._line_stretch(theirs) * CONTROL_DT
             if mine - theirs >= clear:
                 return True
         return False

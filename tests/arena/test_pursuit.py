@@ -283,3 +283,20 @@ def test_a_paced_pursuit_driver_laps_cleanly_that_much_slower() -> None:
     assert 1.15 < laps[0.8] / laps[1.0] < 1.3, laps
     with pytest.raises(ValueError, match="pace"):
         PurePursuitPolicy(track, space, pace=1.2)
+
+
+def test_passing_pursuit_passes_a_slower_racer_on_its_line_without_contact() -> None:
+    """On the 1.07 m speedway the driver starts 0.8 m behind a pursuit driver at 60% of its
+    pace, on the same racing line and braking for the same corners, for 2 laps: it gets
+    past and finishes first in every race, passing on a side with room beside the rival's
+    line while they overlap, without at-fault contact. The driver that planned the pass as
+    if beside the rival it were as fast as on the line passed into corners where the line
+    sits on the apex, and ran into the rival (at fault) in the first race."""
+
+    def paced(track, space):
+        return PurePursuitPolicy(track, space, pace=0.6)
+
+    for seed in range(3):
+        slow, passer = _duel(SPEEDWAY, paced, laps=2, seed=seed)
+        assert passer.finish_position == 1 and slow.finish_position == 2, seed
+        assert passer.at_fault_collisions == 0 and passer.crash_count == 0, seed
