@@ -98,6 +98,8 @@ def test_validate_checks_a_job_without_queuing_it(league: League) -> None:
     broken = "def reward_function(params):\n    return params['no_such_key']\n"
     with league.client("alice") as alice:
         assert alice.post("/api/training-jobs/check", json=_body()).json() == {"ok": True}
+        anchored = _body(options={"anchor": "pursuit", "anchor_weight": 0.5, "critic_warmup": 3})
+        assert alice.post("/api/training-jobs/check", json=anchored).json() == {"ok": True}
         refused = alice.post("/api/training-jobs/check", json=_body(broken))
         assert refused.status_code == 422 and "at line 2" in refused.json()["detail"]
         assert alice.get("/api/training-jobs").json() == []
@@ -113,6 +115,7 @@ def test_validate_checks_a_job_without_queuing_it(league: League) -> None:
         ({"sensors": "radar"}, "radar"),
         ({"race_type": "time_trial", "boxes": 3}, "boxes: only object_avoidance races"),
         ({"race_type": "head_to_bot", "bots": 9}, "bots: Input should be less than or equal"),
+        ({"teacher": "pursuit", "anchor": "pursuit"}, "--anchor holds PPO near a driver"),
     ],
 )
 def test_settings_a_job_may_not_have_are_refused_before_any_code_runs(
