@@ -55,21 +55,17 @@ def cumulative_length(vertices: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Segments:
-    """A polyline's segments ``a -> a + d``, precomputed for repeated projections.
+    """A polyline's segments ``(ax, ay) -> (ax + dx, ay + dy)``, precomputed for repeated
+    projections as separate contiguous columns: a projection of a few points is then a
+    handful of small array operations."""
 
-    The coordinates are kept as separate contiguous columns (``ax``, ``ay``, ``dx``,
-    ``dy``): a projection of a few points is then a handful of small array operations.
-    """
-
-    a: np.ndarray
-    d: np.ndarray
-    length2: np.ndarray
-    cum_length: np.ndarray
     ax: np.ndarray
     ay: np.ndarray
     dx: np.ndarray
     dy: np.ndarray
-    safe_length2: np.ndarray
+    length2: np.ndarray
+    safe_length2: np.ndarray  # length2, at least EPS (a repeated vertex's segment)
+    cum_length: np.ndarray
 
     @classmethod
     def of(cls, vertices: np.ndarray, cum_length: np.ndarray | None = None) -> Segments:
@@ -77,11 +73,10 @@ class Segments:
         d = vertices[1:] - vertices[:-1]
         if cum_length is None:
             cum_length = cumulative_length(vertices)
-        a = vertices[:-1]
-        length2 = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
-        columns = (a[:, 0], a[:, 1], d[:, 0], d[:, 1])
+        columns = (vertices[:-1, 0], vertices[:-1, 1], d[:, 0], d[:, 1])
         ax, ay, dx, dy = (np.ascontiguousarray(c) for c in columns)
-        return cls(a, d, length2, cum_length, ax, ay, dx, dy, np.maximum(length2, EPS))
+        length2 = dx * dx + dy * dy
+        return cls(ax, ay, dx, dy, length2, np.maximum(length2, EPS), cum_length)
 
 
 def project_onto_polyline(
