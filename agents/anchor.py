@@ -30,7 +30,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from agents.imitation import EXPERT_GROUP
+from agents.imitation import EXPERT_GROUP, imitation_loss
 from agents.return_scale import ReturnScaledPPO
 
 ANCHORED_PPO_CLASS = "agents.anchor:AnchoredPPO"
@@ -109,11 +109,7 @@ class _AnchorTerm:
     def compute_loss(self, actor: nn.Module, batch: Any, original_batch_size: int) -> torch.Tensor:
         """The imitation loss of ``actor`` on the batch's states against the teacher's."""
         obs = batch.observations
-        outputs = actor.mlp(actor.get_latent(obs))
-        targets = obs[EXPERT_GROUP]
-        if self.discrete:
-            return nn.functional.cross_entropy(outputs, targets.argmax(dim=-1))
-        return nn.functional.mse_loss(outputs, targets)
+        return imitation_loss(actor, obs, obs[EXPERT_GROUP], self.discrete)
 
 
 def anchored_config(

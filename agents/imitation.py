@@ -64,6 +64,17 @@ class ExpertDriver:
         return np.asarray(action, dtype=np.float32)
 
 
+def imitation_loss(
+    actor: nn.Module, obs: TensorDict, targets: torch.Tensor, discrete: bool
+) -> torch.Tensor:
+    """How far ``actor``'s outputs in the states ``obs`` are from the teacher's ``targets``:
+    squared error of the Gaussian mean, or cross-entropy of the logits (``discrete``)."""
+    outputs = actor.mlp(actor.get_latent(obs))
+    if discrete:
+        return nn.functional.cross_entropy(outputs, targets.argmax(dim=-1))
+    return nn.functional.mse_loss(outputs, targets)
+
+
 class ExpertModel(nn.Module):
     """rsl-rl's teacher model: it returns the :data:`EXPERT_GROUP` observation as is.
 
@@ -125,7 +136,9 @@ class BehaviourCloning(Distillation):
             order = torch.randperm(total, device=self.device)
             for start in range(0, total - size + 1, size):
                 batch = order[start : start + size]
-                loss = self._loss(observations[batch], targets[batch])
+                loss = imitation_loss(
+                    self.student, observations[batch], targets[batch], self.discrete
+                )
                 self.optimizer.zero_grad()
                 loss.backward()
                 if self.max_grad_norm:
@@ -135,12 +148,6 @@ class BehaviourCloning(Distillation):
         self.student.update_normalization(observations)
         storage.clear()
         return {"imitation": float(np.mean(losses)) if losses else float("nan")}
-
-    def _loss(self, obs: TensorDict, targets: torch.Tensor) -> torch.Tensor:
-        outputs = self.student.mlp(self.student.get_latent(obs))
-        if self.discrete:
-            return nn.functional.cross_entropy(outputs, targets.argmax(dim=-1))
-        return nn.functional.mse_loss(outputs, targets)
 
     def save(self) -> dict:
         """The student as the actor (what ``--clone`` and packing read), and the optimizer."""
