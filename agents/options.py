@@ -26,6 +26,10 @@ _FORMS: dict[str, tuple[Any, Any]] = {
     "sensors": (str | None, None),  # comma-separated; default from an action-space file
     "action_space": (str, "default"),  # a spec (agents.action_spaces)
     "opponent": (list[Path] | None, None),  # repeatable
+    "paced_rivals": (  # comma-separated shares, or "none"
+        str,
+        ",".join(str(share) for share in TrainSettings.model_fields["paced_rivals"].default),
+    ),
 }
 # Types the command line takes as they are; any other (Literal, ...) is given as a string.
 _PLAIN = (str, int, float, bool)
@@ -75,8 +79,21 @@ def settings_from_options(options: Mapping[str, Any], **python_only: Any) -> Tra
         "action_space": parse_action_space_spec(given["action_space"]),
         "reward_fn": reward_fn,
         "opponent": tuple(str(Path(p).resolve()) for p in given["opponent"] or ()),
+        "paced_rivals": _shares(given["paced_rivals"]),
     }
     return TrainSettings(**{**given, **parsed, **python_only})
+
+
+def _shares(option: str) -> tuple[float, ...]:
+    """``--paced-rivals``: comma-separated shares, or ``none``."""
+    if option.strip().lower() == "none":
+        return ()
+    try:
+        return tuple(float(share) for share in option.split(",") if share.strip())
+    except ValueError:
+        raise ValueError(
+            f"--paced-rivals takes comma-separated shares such as 0.6,0.8 or 'none', got {option!r}"
+        ) from None
 
 
 def _sensors(option: str | None, action_space: str) -> tuple[str, ...]:

@@ -120,6 +120,23 @@ RECIPES: dict[str, Recipe] = {
             parent="time_trial",
         ),
         Recipe(
+            name="head_to_model_ppo",
+            summary="PPO on the head_to_head reward after head_to_model imitation; needs "
+            "--clone of a head_to_model run; held near the passing pursuit driver, racing "
+            "its snapshots, paced pursuit racers and that run's model",
+            options={
+                "race_type": "head_to_model",
+                "track": "slipstream_speedway",
+                "sensors": "camera",  # the head_to_model run's
+                "action_space": RACING_ACTIONS,
+                "reward_fn": "head_to_head",
+                "anchor": "pursuit",  # PPO alone loses what imitation gave in minutes
+                "selfplay": "pool",
+                **_RACE_TYPE_EVALS,
+            },
+            parent="head_to_model",
+        ),
+        Recipe(
             name="first_laps",
             summary="fast start: PPO from scratch, camera, 3x3 discrete at 1 m/s, "
             "follow_center_line, cheap updates; clean laps in about a minute",

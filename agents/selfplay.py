@@ -1,7 +1,9 @@
 """Opponents for head-to-model training: prioritised fictitious self-play (PFSP).
 
-The pool holds frozen snapshots of the learner (exported to ONNX every few iterations)
-and any ONNX policies the user adds. Each race gets an opponent sampled with PFSP's
+The pool holds frozen snapshots of the learner (exported to ONNX every few iterations),
+any ONNX policies the user adds, and paced racers: the pure-pursuit driver on the racing
+line at a share of the learner's own pace (its laps in its last evaluation), so that it
+meets slower cars to pass and equal ones to race. Each race gets an opponent sampled with PFSP's
 "hard" weighting: an opponent the learner beats with rate ``p`` is drawn with weight
 ``(1 - p) ** 2`` (plus a small floor so no opponent is forgotten), so training time goes
 to the opponents the learner still loses to. Win rates are exponential moving averages
@@ -20,10 +22,25 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from arena.actions import ActionSpace
+    from arena.config import RaceConfig
+    from arena.policy import Policy
     from submissions.runner import OnnxRunner
+    from tracks.track import Track
 
 WEIGHT_FLOOR = 0.05
 UNPLAYED_WIN_RATE = 0.5
+
+
+@dataclass(frozen=True)
+class Opponent:
+    """What drives a race's non-learner cars: a frozen ONNX policy (``graph``), or the
+    pure-pursuit driver at ``pace``, a share of its speed profile
+    (:class:`arena.pursuit.PurePursuitPolicy`)."""
+
+    name: str
+    graph: bytes = b""
+    pace: float | None = None
 
 
 def pfsp_weights(win_rates: list[float] | np.ndarray) -> np.ndarray:
@@ -53,16 +70,43 @@ def opponent_policy(graph: bytes, discrete: bool, name: str = "opponent") -> Onn
     return OnnxRunner.from_graph(graph, discrete, non_finite="zero", name=name)
 
 
+def opponent_driver(opponent: Opponent, track: Track, action_space: ActionSpace) -> Policy:
+    """The policy that drives one of a race's non-learner cars as ``opponent`` says."""
+    from arena.actions import DiscreteActionSpace
+    from arena.pursuit import PurePursuitPolicy
+
+    if opponent.pace is not None:
+        return PurePursuitPolicy(track, action_space, pace=opponent.pace)
+    discrete = isinstance(action_space, DiscreteActionSpace)
+    return opponent_policy(opponent.graph, discrete, opponent.name)
+
+
+def pursuit_lap_s(config: RaceConfig) -> float | None:
+    """The pure-pursuit driver's mean lap at full pace in the time trial ``config``, from
+    its standing start (None if it does not finish): what paced racers are scaled by."""
+    from agents.evaluate import evaluate_policy
+    from arena.config import resolve_track
+    from arena.pursuit import PurePursuitPolicy
+
+    car = config.cars[0]
+    driver = PurePursuitPolicy(resolve_track(config)[0], car.action_space)
+    result = evaluate_policy(config, driver).car(car.name)
+    return result.total_time / result.laps if result.total_time and result.laps else None
+
+
 @dataclass
 class _Entry:
     graph: bytes
     win_rate: float = UNPLAYED_WIN_RATE
     games: int = 0
     snapshot: bool = True
+    share: float | None = None  # a paced racer: its share of the learner's pace
 
 
 class OpponentPool:
-    """Frozen snapshots plus user policies, sampled by PFSP.
+    """Frozen snapshots, user policies and paced racers, sampled by PFSP.
+
+    Paced racers are drawn only once the learner's pace is known (:meth:`set_pace`).
 
     Args:
         max_snapshots: snapshots kept (oldest dropped first); user policies always stay.
@@ -75,6 +119,7 @@ class OpponentPool:
         self.ema = ema
         self.rng = np.random.default_rng(seed)
         self.entries: OrderedDict[str, _Entry] = OrderedDict()
+        self.pace: float | None = None  # the learner's speed over the pursuit driver's
 
     def __len__(self) -> int:
         return len(self.entries)
@@ -92,6 +137,19 @@ class OpponentPool:
         self.entries[name] = _Entry(read_policy_graph(path), snapshot=False)
         return name
 
+    def add_paced(self, share: float) -> str:
+        """Add the pursuit driver at ``share`` (0-1] of the learner's pace; returns its name."""
+        name = f"pursuit:{share:.0%}"
+        self.entries[name] = _Entry(b"", snapshot=False, share=share)
+        return name
+
+    def set_pace(self, learner_lap_s: float, pursuit_lap_s: float) -> None:
+        """The learner's mean lap against the pursuit driver's own at full pace: paced
+        racers then drive at their share of the learner's speed (at most the driver's)."""
+        if learner_lap_s <= 0 or pursuit_lap_s <= 0:
+            raise ValueError("lap times must be positive")
+        self.pace = pursuit_lap_s / learner_lap_s
+
     def record(self, name: str, win: bool) -> None:
         """Fold one episode's outcome against ``name`` into its win rate."""
         entry = self.entries.get(name)
@@ -99,19 +157,32 @@ class OpponentPool:
             entry.games += 1
             entry.win_rate += self.ema * (float(win) - entry.win_rate)
 
-    def sample(self, count: int) -> list[tuple[str, bytes]]:
+    def sample(self, count: int) -> list[Opponent]:
         """``count`` opponents drawn (with replacement) by PFSP weights."""
-        if not self.entries:
-            raise ValueError("the opponent pool is empty")
         probabilities = self.probabilities()
+        if not probabilities:
+            raise ValueError("the opponent pool has no opponent to draw")
         names = list(probabilities)
         picks = self.rng.choice(len(names), size=count, p=list(probabilities.values()))
-        return [(names[i], self.entries[names[i]].graph) for i in picks]
+        return [self._opponent(names[i]) for i in picks]
+
+    def _opponent(self, name: str) -> Opponent:
+        entry = self.entries[name]
+        if entry.share is None:
+            return Opponent(name, entry.graph)
+        assert self.pace is not None  # drawn only once the pace is known
+        return Opponent(name, pace=min(1.0, entry.share * self.pace))
 
     def probabilities(self) -> dict[str, float]:
-        """Each opponent's chance of being drawn (:func:`pfsp_weights` of the win rates)."""
-        weights = pfsp_weights([e.win_rate for e in self.entries.values()])
-        return dict(zip(self.entries, weights.tolist(), strict=True))
+        """Each drawable opponent's chance of being drawn (:func:`pfsp_weights` of the win
+        rates); paced racers are left out while the learner's pace is unknown."""
+        drawable = {
+            name: e for name, e in self.entries.items() if e.share is None or self.pace is not None
+        }
+        if not drawable:
+            return {}
+        weights = pfsp_weights([e.win_rate for e in drawable.values()])
+        return dict(zip(drawable, weights.tolist(), strict=True))
 
     def win_rates(self) -> dict[str, float]:
         """Current win rate against every opponent."""

@@ -14,7 +14,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from agents.privileged import CriticInput
 from arena.actions import ActionSpace, DiscreteActionSpace
@@ -137,6 +144,12 @@ class TrainSettings(BaseModel):
     snapshot_every: int = Field(
         10, description="Pool self-play: snapshot the learner into the pool every N iterations."
     )
+    paced_rivals: tuple[float, ...] = Field(
+        (0.6, 0.8, 0.9, 1.0),
+        description="Pool self-play: the pure-pursuit driver races in the pool at these "
+        "shares of the learner's pace, from its first evaluation that finishes a lap "
+        "(comma-separated; 'none': no paced rivals).",
+    )
     device: str = Field("cpu", description="cpu, cuda or cuda:N.")
     threads: int | None = Field(
         None,
@@ -164,6 +177,14 @@ class TrainSettings(BaseModel):
     def _race_settings_fit(self) -> TrainSettings:
         self.race_rules()
         return self
+
+    @field_validator("paced_rivals")
+    @classmethod
+    def _shares_of_pace(cls, shares: tuple[float, ...]) -> tuple[float, ...]:
+        outside = [share for share in shares if not 0.0 < share <= 1.0]
+        if outside:
+            raise ValueError(f"a share of the learner's pace is in (0, 1], got {outside[0]}")
+        return shares
 
     @model_validator(mode="after")
     def _anchor_needs_ppo(self) -> TrainSettings:

@@ -28,7 +28,7 @@ from agents.imitation import imitation_config
 from agents.metrics import IterationStats, append_metrics
 from agents.run import Run, holds_run
 from agents.runner import RacingRunner
-from agents.selfplay import OpponentPool
+from agents.selfplay import OpponentPool, pursuit_lap_s
 from agents.settings import TrainSettings
 from agents.vecenv import RacingVecEnv
 from arena.simtrace import write_simtrace
@@ -134,6 +134,7 @@ class Trainer:
         self.elapsed_before = 0.0
         self.writes_run_folder = _rank() == 0  # under torchrun, rank 0 alone
         self.eval_opponent = evaluate.run_opponent(settings) if self.writes_run_folder else None
+        self.pursuit_lap_s: float | None = None  # measured once, for paced pool racers
         self.best_score = stored.best_score() if stored else None
         self.fastest_lap = stored.fastest_lap() if stored else None
 
@@ -171,6 +172,8 @@ class Trainer:
             pool = OpponentPool(seed=s.seed)
             for path in s.opponent:
                 pool.add_policy(path)
+            for share in s.paced_rivals:
+                pool.add_paced(share)
             learners = [config.cars[0].name]
         env = RacingVecEnv(
             config,
@@ -381,6 +384,8 @@ class Trainer:
             self._write_training_simtrace(it, simtrace)
             self.dr_metrics.add_training(episodes)
         evaluation = self._evaluate(runner) if self._evaluation_due(it, elapsed) else None
+        if pool is not None and evaluation is not None:
+            self._pace_pool(pool, evaluation)
         return IterationStats.of_iteration(it, elapsed, len(simtrace), episodes, losses, evaluation)
 
     def _write_outputs(self, stats: IterationStats) -> None:
@@ -410,6 +415,19 @@ class Trainer:
                 pool.record(e["opponent"], e["win"])
         if (it + 1) % self.settings.snapshot_every == 0:
             pool.add_snapshot(f"snapshot:{it}", self._graph(runner))
+
+    def _pace_pool(self, pool: OpponentPool, evaluation: EvalSummary) -> None:
+        """Pace the pool's paced racers to the learner's laps in ``evaluation``: its mean
+        lap when it finished, else its best; nothing if it finished no lap."""
+        lap = evaluation.total_time / evaluation.laps if evaluation.total_time else None
+        lap = lap or evaluation.best_lap
+        if lap is None or not self.settings.paced_rivals:
+            return
+        if self.pursuit_lap_s is None:
+            trial = self.target.evaluation_config(race_type="time_trial")
+            self.pursuit_lap_s = pursuit_lap_s(trial)
+        if self.pursuit_lap_s is not None:
+            pool.set_pace(lap, self.pursuit_lap_s)
 
     def _evaluation_due(self, it: int, elapsed: float) -> bool:
         """Every ``eval_every`` iterations and after the one that spends the budget, of

@@ -29,6 +29,7 @@ from agents.imitation import EXPERT_GROUP, ExpertDriver
 from agents.networks import observation_groups
 from agents.privileged import PRIVILEGED_GROUP, privileged_state
 from agents.rewards import resolve_reward
+from agents.selfplay import Opponent, opponent_driver
 from agents.settings import RACES_PER_WORKER
 from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
@@ -37,12 +38,18 @@ from arena.params import RewardRaised
 from arena.simtrace import simtrace_row, step_facts
 
 # Head to model: how far from a racing rival a restarted car starts, metres along the track,
-# in the other lane. A learner restarts behind its rival and ahead of it in turn (an
-# opponent the other way round), so that it practises both following and leading at its
-# own pace: a learner that only ever restarts behind rarely sees a clear track and
-# forgets how to drive it fast (benchmarks/RESULTS.md, "Which races a head-to-model
-# learner wins").
+# in the other lane. A learner restarts behind its rival, ahead of it and alongside it in
+# turn (an opponent the other way round), so that it practises following, leading and
+# racing side by side at its own pace: a learner that only ever restarts behind rarely
+# sees a clear track and forgets how to drive it fast (benchmarks/RESULTS.md, "Which
+# races a head-to-model learner wins").
 PASS_GAP_M = 1.0
+# A learner's restarts near a rival in turn, metres from it along the track: behind it (to
+# pass), ahead of it (to lead and defend), alongside it (to race side by side). Alongside
+# only on a track of DeepRacer's width or wider: on a narrower one the lanes' centres are
+# closer than a car's width to a rival between them.
+RESTART_GAPS_M = (-PASS_GAP_M, PASS_GAP_M, 0.0)
+ALONGSIDE_MIN_WIDTH_M = 1.0
 # Every GRID_EVERY-th restart of a learner racing frozen opponents is instead a standing
 # start on a fresh grid, the learner in the back slot, as a race starts it from behind: its
 # first training grid puts it in front, and restarts near a rival that is already racing
@@ -130,7 +137,8 @@ class EnvGroup:
             else {}
         )
         self.rows: list[dict[str, Any]] = []
-        self.opponents: dict[int, tuple[str, Any]] = {}
+        self.opponents: dict[int, str] = {}  # race -> the name of its opponent
+        self.drivers: dict[tuple[int, str], Any] = {}  # (race, car) -> the opponent's policy
         self.last_obs: dict[tuple[int, str], dict[str, np.ndarray]] = {}
         self.last_info: dict[tuple[int, str], dict[str, Any]] = {}
         self.restarts: Counter[tuple[int, str]] = Counter()  # restarts near a rival
@@ -147,12 +155,16 @@ class EnvGroup:
         n = len(self.slots)
         return StepBatch(self._stack_obs(), np.zeros(n), np.zeros(n, bool), np.zeros(n, bool))
 
-    def set_opponents(self, assignments: dict[int, tuple[str, bytes]]) -> None:
-        """Give race ``i`` an opponent ``(name, onnx_bytes)`` for its non-learner cars."""
-        from agents.selfplay import opponent_policy
-
-        for i, (name, graph) in assignments.items():
-            self.opponents[i] = (name, opponent_policy(graph, self.discrete, name))
+    def set_opponents(self, assignments: dict[int, Opponent]) -> None:
+        """Give race ``i`` an opponent that drives each of its non-learner cars."""
+        for i, opponent in assignments.items():
+            env = self.envs[i]
+            self.opponents[i] = opponent.name
+            for car in env.config.cars:
+                if car.name not in self.learners:
+                    self.drivers[(i, car.name)] = opponent_driver(
+                        opponent, env.track, car.action_space
+                    )
 
     def drain_simtrace(self) -> list[dict[str, Any]]:
         """Simtrace rows recorded since the last call."""
@@ -213,13 +225,15 @@ class EnvGroup:
                     self.slots[k].start = env.time
                     if self.experts:
                         self.experts[(i, started)].reset()
+                elif (i, started) in self.drivers:
+                    self.drivers[(i, started)].reset()
 
     def _restart_kind(self, i: int, car: str) -> _Restart:
-        """How head-to-model race ``i`` restarts ``car``: :data:`PASS_GAP_M` from a racing
-        rival, a learner behind it on its first restart, ahead of it on the next and so on,
-        an opponent the other way round (ahead of a learner first); but a learner racing
-        only frozen opponents starts every :data:`GRID_EVERY`-th restart, one from behind,
-        standing behind them on a fresh grid. Other race types: the next start point."""
+        """How head-to-model race ``i`` restarts ``car``: beside a racing rival, in turn
+        :data:`PASS_GAP_M` behind it, as far ahead of it and alongside it (a learner behind
+        first, an opponent ahead first); but a learner racing only frozen opponents starts
+        every :data:`GRID_EVERY`-th restart, one from behind, standing behind them on a
+        fresh grid. Other race types: the next start point."""
         env = self.envs[i]
         if env.config.race_type != "head_to_model":
             return _Restart()
@@ -229,10 +243,11 @@ class EnvGroup:
             return _Restart()
         count = self.restarts[(i, car)]
         self.restarts[(i, car)] += 1
-        behind = (count % 2 == 0) == learner
         if learner and count % GRID_EVERY == 0 and self.learners.isdisjoint(rivals):
             return _Restart(grid=(*rivals, car))
-        return _Restart(near=(rivals[0], -PASS_GAP_M if behind else PASS_GAP_M))
+        gaps = RESTART_GAPS_M if env.track.width >= ALONGSIDE_MIN_WIDTH_M else RESTART_GAPS_M[:2]
+        gap = gaps[count % len(gaps)]
+        return _Restart(near=(rivals[0], gap if learner else -gap))
 
     def _action(
         self, i: int, car: str, actions: np.ndarray, slot_of: dict[tuple[int, str], int]
@@ -240,9 +255,12 @@ class EnvGroup:
         k = slot_of.get((i, car))
         if k is not None:
             return int(actions[k]) if self.discrete else actions[k]
-        if i not in self.opponents:
+        driver = self.drivers.get((i, car))
+        if driver is None:
             raise RuntimeError(f"race {i}: car {car!r} has neither a learner slot nor an opponent")
-        return self.opponents[i][1].act(self.last_obs[(i, car)])
+        if getattr(driver, "needs_params", False):
+            return driver.act(self.last_obs[(i, car)], self.last_info[(i, car)]["params"])
+        return driver.act(self.last_obs[(i, car)])
 
     def _episode_stats(self, i: int, car: str, slot: _Slot, info: dict[str, Any]) -> dict:
         lap_complete = info["episode_status"] == "lap_complete"
@@ -261,7 +279,7 @@ class EnvGroup:
                 for c in self.envs[i].possible_agents
                 if c not in self.learners
             ]
-            stats["opponent"] = self.opponents[i][0]
+            stats["opponent"] = self.opponents[i]
             stats["win"] = stats["lap_complete"] or stats["progress"] > max(rivals, default=0.0)
         slot.episode += 1
         slot.steps, slot.reward = 0, 0.0
@@ -505,8 +523,8 @@ class RacingVecEnv(VecEnv):
         """Simtrace rows of every slot since the last call."""
         return [row for rows in self._call("drain_simtrace") for row in rows]
 
-    def set_opponents(self, assignments: dict[int, tuple[str, bytes]]) -> None:
-        """Assign ``(name, onnx_bytes)`` opponents to races (global race index)."""
+    def set_opponents(self, assignments: dict[int, Opponent]) -> None:
+        """Assign opponents to races (global race index)."""
         per_group = [
             ({local: assignments[g] for local, g in enumerate(races) if g in assignments},)
             for races in self._races_of

@@ -67,6 +67,20 @@ def test_head_to_model_needs_a_parent_run_and_races_its_model(tmp_path):
     assert settings.selfplay == "pool"
 
 
+def test_ppo_after_head_to_model_imitation_is_anchored_and_races_the_imitation_model(tmp_path):
+    imitation = tmp_path / "imitation"
+    (imitation / "model").mkdir(parents=True)
+    (imitation / "model" / "model.zip").write_bytes(b"zip")
+    given = {"minutes": 1.0}
+    settings = cli._settings(tmp_path / "r", "head_to_model_ppo", imitation, False, given)
+    assert settings.opponent == (str((imitation / "model" / "model.zip").resolve()),)
+    assert settings.teacher is None and settings.anchor == "pursuit"
+    assert settings.selfplay == "pool" and settings.paced_rivals
+    head_to_model = get_recipe("head_to_model").settings()
+    for same in ("track", "sensors", "action_space", "preset"):  # what a clone must keep
+        assert getattr(settings, same) == getattr(head_to_model, same), same
+
+
 @pytest.mark.slow
 def test_train_with_a_recipe_applies_and_records_it(tmp_path):
     run = tmp_path / "quick"

@@ -10,10 +10,12 @@ import pytest
 
 from agents.action_spaces import parse_action_space_spec
 from agents.evaluate import evaluate_policy, evaluation_config, run_opponent
-from agents.selfplay import opponent_policy
+from agents.selfplay import opponent_policy, pursuit_lap_s
 from agents.settings import TrainSettings
+from arena.pursuit import racing_line_for
 from submissions import OnnxRunner
 from tests.submissions.test_runner import identity
+from tracks.catalog import get_track
 
 
 def test_opponents_drive_greedily_and_zero_non_finite_outputs() -> None:
@@ -65,3 +67,17 @@ def test_a_head_to_model_run_evaluates_against_its_first_opponent(tmp_path) -> N
     camera = run.model_copy(update={"sensors": ("camera",)})
     with pytest.raises(ValueError, match="reads lidar, which this run's cars do not have"):
         run_opponent(camera)
+
+
+def test_paced_racers_are_scaled_by_the_pursuit_drivers_own_laps() -> None:
+    """Its mean lap from a standing start: slower than the racing line's limit lap (it
+    starts standing and its steering lags), within a fifth of it."""
+    space = parse_action_space_spec("continuous:-30:30:0.5:4")
+    trial = evaluation_config("slipstream_speedway", "time_trial", ("lidar",), space, laps=2)
+    limit = racing_line_for(get_track("slipstream_speedway")).lap_time
+    lap = pursuit_lap_s(trial)
+    assert lap is not None and limit < lap < 1.2 * limit
+    stopped = evaluation_config(
+        "slipstream_speedway", "time_trial", ("lidar",), space, laps=2, time_limit_s=5.0
+    )
+    assert pursuit_lap_s(stopped) is None  # no lap in 5 s: nothing to scale by

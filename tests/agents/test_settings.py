@@ -25,7 +25,7 @@ from agents.settings import (
 SPACE = parse_action_space_spec("3x3@1.0")
 NOT_SETTINGS = {"out", "recipe", "list_recipes", "clone", "resume", "hyperparameters"}
 # Options whose command-line form differs from the field's type (agents.options).
-PARSED = {"sensors", "action_space", "opponent"}
+PARSED = {"sensors", "action_space", "opponent", "paced_rivals"}
 
 
 def _train_options() -> dict[str, TyperOption]:
@@ -62,13 +62,26 @@ def test_command_line_forms_map_to_the_fields(tmp_path, monkeypatch):
         "action_space": "3x3@1.0",
         "reward_fn": "reward.py",
         "opponent": ["a.onnx"],
+        "paced_rivals": "0.7, 1",
         "iterations": 3,
     }
     settings = settings_from_options(options)
+    assert settings.paced_rivals == (0.7, 1.0)
     assert settings.sensors == ("camera", "lidar") and settings.action_space == SPACE
     assert settings.reward_fn == str(reward.resolve())
     assert settings.opponent == (str(tmp_path / "a.onnx"),)
     assert settings.iterations == 3
+
+
+def test_paced_rivals_default_to_four_shares_and_none_turns_them_off():
+    assert settings_from_options({}).paced_rivals == (0.6, 0.8, 0.9, 1.0)
+    assert settings_from_options({"paced_rivals": "none"}).paced_rivals == ()
+    with pytest.raises(ValueError, match="--paced-rivals takes comma-separated shares"):
+        settings_from_options({"paced_rivals": "fast"})
+    with pytest.raises(
+        ValidationError, match=r"share of the learner's pace is in \(0, 1\], got 1.2"
+    ):
+        settings_from_options({"paced_rivals": "0.8,1.2"})
 
 
 def test_resume_keeps_the_run_settings_but_the_overrides(tmp_path):

@@ -256,11 +256,34 @@ def test_pool_draws_opponents_with_the_documented_probabilities(tmp_path):
     assert pool.probabilities() == pytest.approx(expected)
     draws = 20_000
     picks = pool.sample(draws)
-    assert dict(picks) == {
+    assert {o.name: o.graph for o in picks} == {
         "snapshot:0": b"graph 0", "snapshot:9": b"graph 9", "user:rival.onnx": b"rival"
     }  # fmt: skip
-    names = [name for name, _ in picks]
+    names = [o.name for o in picks]
     for name, p in expected.items():  # 4 standard deviations: below 0.014
         assert names.count(name) / draws == pytest.approx(p, abs=4 * (p * (1 - p) / draws) ** 0.5)
     again = _pool(tmp_path, seed=7)
-    assert [n for n, _ in again.sample(100)] == names[:100]  # a fixed seed draws the same
+    assert [o.name for o in again.sample(100)] == names[:100]  # a fixed seed draws the same
+
+
+def test_paced_racers_join_the_draw_at_their_share_of_the_learners_pace():
+    pool = OpponentPool(seed=1)
+    pool.add_snapshot("snapshot:start", b"graph")
+    for share in (0.6, 0.9, 1.0):
+        pool.add_paced(share)
+    # Until an evaluation gives the learner's pace, only the snapshot is drawn.
+    assert list(pool.probabilities()) == ["snapshot:start"]
+    assert {o.name for o in pool.sample(50)} == {"snapshot:start"}
+    pool.set_pace(learner_lap_s=10.0, pursuit_lap_s=8.0)  # the learner at 80% of the driver
+    assert list(pool.probabilities()) == [
+        "snapshot:start",
+        "pursuit:60%",
+        "pursuit:90%",
+        "pursuit:100%",
+    ]
+    paces = {o.name: o.pace for o in pool.sample(200) if o.pace is not None}
+    assert paces == pytest.approx({"pursuit:60%": 0.48, "pursuit:90%": 0.72, "pursuit:100%": 0.8})
+    pool.set_pace(learner_lap_s=7.0, pursuit_lap_s=8.0)  # faster than the driver: capped
+    paces = {o.name: o.pace for o in pool.sample(200) if o.pace is not None}
+    assert paces["pursuit:100%"] == 1.0 and paces["pursuit:90%"] == 1.0
+    assert paces["pursuit:60%"] == pytest.approx(0.6 * 8 / 7)

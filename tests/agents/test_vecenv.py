@@ -11,6 +11,7 @@ from tensordict import TensorDict
 import arena
 from agents import networks
 from agents.export import export_onnx
+from agents.selfplay import Opponent
 from agents.settings import RACES_PER_WORKER
 from agents.vecenv import GRID_EVERY, PASS_GAP_M, RacingVecEnv
 from arena.actions import ContinuousActionSpace, default_discrete_space
@@ -125,7 +126,7 @@ def test_head_to_model_with_frozen_opponent():
         torch.manual_seed(0)  # the same opponent, so the same restarts, every run
         actor = networks.build_actor("dense 256-256", ("lidar",), SPACE)
         graph = export_onnx(actor, ("lidar",), SPACE)
-        env.set_opponents({0: ("snapshot:0", graph), 1: ("snapshot:0", graph)})
+        env.set_opponents({0: Opponent("snapshot:0", graph), 1: Opponent("snapshot:0", graph)})
         near, grid = [], []  # the rival's distance ahead of each restarted learner
         for _ in range(90):
             _, _, dones, _ = env.step(_one_hot(env, 1))  # the learners circle off the road
@@ -140,8 +141,9 @@ def test_head_to_model_with_frozen_opponent():
                 standing = rival["steps"] == 0  # the rival was restarted with the learner
                 (grid if standing else near).append((gap + length / 2) % length - length / 2)
                 assert me["is_left_of_center"] != rival["is_left_of_center"]
-        # Restarted behind the rival (to follow or pass it) and ahead of it (to lead), and
-        # every GRID_EVERY-th time both standing on a grid, the learner in the back slot.
+        # Restarted behind the rival (to follow or pass it) and ahead of it (to lead), never
+        # alongside on this 0.76 m track, and every GRID_EVERY-th time both standing on a
+        # grid, the learner in the back slot.
         assert [abs(g) for g in near] == pytest.approx([PASS_GAP_M] * len(near), abs=0.15)
         assert min(near) < 0 < max(near)
         assert len(grid) >= 2 and grid == pytest.approx([GRID_GAP_M] * len(grid), abs=0.1)
@@ -149,6 +151,48 @@ def test_head_to_model_with_frozen_opponent():
         episodes = env.pop_episodes()
         assert episodes and all(e["opponent"] == "snapshot:0" for e in episodes)
         assert all(isinstance(e["win"], bool) for e in episodes)
+    finally:
+        env.close()
+
+
+def test_a_paced_racer_drives_clean_and_learners_restart_beside_it_on_a_wide_track():
+    """On DeepRacer's width a learner restarts behind, ahead of and alongside its rival in
+    turn; the pool's paced pure-pursuit racer drives the opponent car on the road."""
+    config = arena.make_config(
+        track="slipstream_speedway",
+        mode="training",
+        seed=3,
+        race_type="head_to_model",
+        num_cars=2,
+        sensors=("lidar",),
+        action_space=SPACE,
+    )
+    env = RacingVecEnv(
+        config, "follow_center_line", num_races=1, num_workers=0, learner_cars=["car0"]
+    )
+    try:
+        env.set_opponents({0: Opponent("pursuit:60%", pace=0.6)})
+        race = env._local.envs[0]
+        near, rival_arcs, off_road = [], [], 0
+        for _ in range(240):
+            _, _, dones, _ = env.step(_one_hot(env, 1))  # the learner circles off the road
+            rival = env._local.last_info[(0, "car1")]["params"]
+            off_road += not rival["all_wheels_on_track"]
+            rival_arcs.append(rival["projection_distance"])
+            if dones[0] and "car1" in race.agents and rival["steps"] > 0:
+                me = env._local.last_info[(0, "car0")]["params"]
+                length = me["track_length"]
+                gap = rival["projection_distance"] - me["projection_distance"]
+                near.append((gap + length / 2) % length - length / 2)
+                assert me["is_left_of_center"] != rival["is_left_of_center"]
+        assert off_road == 0
+        assert max(rival_arcs) - min(rival_arcs) > 5.0  # it races on, 60% of the line's pace
+        behind = [g for g in near if g > PASS_GAP_M / 2]
+        ahead = [g for g in near if g < -PASS_GAP_M / 2]
+        alongside = [g for g in near if abs(g) < 0.15]
+        assert behind and ahead and alongside, near
+        assert len(behind) + len(ahead) + len(alongside) == len(near)
+        assert {e["opponent"] for e in env.pop_episodes()} == {"pursuit:60%"}
     finally:
         env.close()
 
