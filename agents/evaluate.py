@@ -176,6 +176,14 @@ class EvalSummary:
     status: str
 
     @property
+    def pace_lap(self) -> float | None:
+        """The car's pace as a lap time: its mean lap if it finished, else its best lap
+        (None if it finished no lap)."""
+        if self.total_time is not None and self.laps:
+            return self.total_time / self.laps
+        return self.best_lap
+
+    @property
     def score(self) -> tuple[float, float, float]:
         """Order of merit, higher is better: progress, then fewer off-tracks and crashes,
         then an earlier finish."""

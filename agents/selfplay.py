@@ -17,7 +17,7 @@ import zipfile
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -187,3 +187,17 @@ class OpponentPool:
     def win_rates(self) -> dict[str, float]:
         """Current win rate against every opponent."""
         return {name: e.win_rate for name, e in self.entries.items()}
+
+    def table(self) -> list[dict[str, Any]]:
+        """Every opponent: its games, the learner's win rate against it, its chance of
+        being drawn and, for a paced racer, the pace it drives at (None until known)."""
+        probabilities = self.probabilities()
+        rows = []
+        for name, e in self.entries.items():
+            row = {"opponent": name, "games": e.games, "win_rate": round(e.win_rate, 4)}
+            row["draw_probability"] = round(probabilities.get(name, 0.0), 4)
+            if e.share is not None:
+                pace = self._opponent(name).pace if self.pace is not None else None
+                row["pace"] = None if pace is None else round(pace, 4)
+            rows.append(row)
+        return rows

@@ -4,6 +4,7 @@ run folder in deepracer-for-cloud's layout (``agents.run``).
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import threading
@@ -60,6 +61,8 @@ def _rank() -> int:
 
 # PPO updates that train only the critic at the start of a clone whose critic is new.
 CLONE_CRITIC_WARMUP = 5
+# In a pool self-play run's folder: each opponent's games, win rate, draw chance and pace.
+POOL_FILE = "selfplay_pool.json"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """What stops training: Ctrl-C, ``kill`` / systemd / a container stop, a closed terminal."""
 
@@ -409,18 +412,21 @@ class Trainer:
         it: int,
         episodes: list[dict[str, Any]],
     ) -> None:
-        """Record the learner's wins and losses; snapshot it every ``snapshot_every``."""
+        """Record the learner's wins and losses; snapshot it every ``snapshot_every``;
+        write the pool's table (``POOL_FILE``)."""
         for e in episodes:
             if "opponent" in e:
                 pool.record(e["opponent"], e["win"])
         if (it + 1) % self.settings.snapshot_every == 0:
             pool.add_snapshot(f"snapshot:{it}", self._graph(runner))
+        if self.writes_run_folder:
+            table = {"iteration": it, "opponents": pool.table()}
+            (self.run_dir / POOL_FILE).write_text(json.dumps(table, indent=1) + "\n")
 
     def _pace_pool(self, pool: OpponentPool, evaluation: EvalSummary) -> None:
-        """Pace the pool's paced racers to the learner's laps in ``evaluation``: its mean
-        lap when it finished, else its best; nothing if it finished no lap."""
-        lap = evaluation.total_time / evaluation.laps if evaluation.total_time else None
-        lap = lap or evaluation.best_lap
+        """Pace the pool's paced racers to the learner's laps in ``evaluation``
+        (:attr:`EvalSummary.pace_lap`); nothing if it finished no lap."""
+        lap = evaluation.pace_lap
         if lap is None or not self.settings.paced_rivals:
             return
         if self.pursuit_lap_s is None:

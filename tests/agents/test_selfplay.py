@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from agents.action_spaces import parse_action_space_spec
-from agents.evaluate import evaluate_policy, evaluation_config, run_opponent
+from agents.evaluate import EvalSummary, evaluate_policy, evaluation_config, run_opponent
 from agents.selfplay import opponent_policy, pursuit_lap_s
 from agents.settings import TrainSettings
 from arena.pursuit import racing_line_for
@@ -81,3 +81,11 @@ def test_paced_racers_are_scaled_by_the_pursuit_drivers_own_laps() -> None:
         "slipstream_speedway", "time_trial", ("lidar",), space, laps=2, time_limit_s=5.0
     )
     assert pursuit_lap_s(stopped) is None  # no lap in 5 s: nothing to scale by
+
+
+def test_a_learners_pace_is_its_mean_lap_else_its_best() -> None:
+    finished = EvalSummary(3, 100.0, 9.0, 30.0, 0, 0, 0, "finished")
+    assert finished.pace_lap == 10.0
+    unfinished = EvalSummary(1, 50.0, 11.0, None, 2, 0, 0, "time_limit")
+    assert unfinished.pace_lap == 11.0
+    assert EvalSummary(0, 40.0, None, None, 1, 0, 0, "time_limit").pace_lap is None

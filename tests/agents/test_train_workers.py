@@ -274,6 +274,10 @@ def test_paced_racers_join_the_draw_at_their_share_of_the_learners_pace():
     # Until an evaluation gives the learner's pace, only the snapshot is drawn.
     assert list(pool.probabilities()) == ["snapshot:start"]
     assert {o.name for o in pool.sample(50)} == {"snapshot:start"}
+    assert pool.table()[1] == {
+        "opponent": "pursuit:60%", "games": 0, "win_rate": 0.5, "draw_probability": 0.0,
+        "pace": None,
+    }  # fmt: skip
     pool.set_pace(learner_lap_s=10.0, pursuit_lap_s=8.0)  # the learner at 80% of the driver
     assert list(pool.probabilities()) == [
         "snapshot:start",
@@ -283,6 +287,8 @@ def test_paced_racers_join_the_draw_at_their_share_of_the_learners_pace():
     ]
     paces = {o.name: o.pace for o in pool.sample(200) if o.pace is not None}
     assert paces == pytest.approx({"pursuit:60%": 0.48, "pursuit:90%": 0.72, "pursuit:100%": 0.8})
+    assert [row["pace"] for row in pool.table()[1:]] == pytest.approx([0.48, 0.72, 0.8])
+    assert sum(row["draw_probability"] for row in pool.table()) == pytest.approx(1.0)
     pool.set_pace(learner_lap_s=7.0, pursuit_lap_s=8.0)  # faster than the driver: capped
     paces = {o.name: o.pace for o in pool.sample(200) if o.pace is not None}
     assert paces["pursuit:100%"] == 1.0 and paces["pursuit:90%"] == 1.0

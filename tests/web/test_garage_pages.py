@@ -103,6 +103,25 @@ def test_the_garage_lists_the_racers_jobs_and_models_and_acts_on_them(
     body = page.evaluate("() => Create.jobBody(formState())")
     assert body["clone_of"] == clone and body["name"] == "garage-parent-clone"
     assert body["options"] == OPTIONS and body["hyperparameters"] == {"lr": 0.001}
+    assert not page.is_checked("#anchor")  # its parent learned from its reward alone
+
+    # A clone of a fast-start (imitation) job learns from its reward by PPO, held near
+    # the scripted driver; fast start and the anchor exclude each other.
+    imitation = _add_job(league, "alice", "garage-imitation", "done", run_sha256="2" * 64)
+    with league.sessions() as session:
+        job = session.get(TrainingJob, imitation)
+        job.spec = {**job.spec, "recipe": "time_trial"}
+        session.commit()
+    page.goto(f"/garage/new?clone={imitation}")
+    page.wait_for_selector("#create-form[data-ready=true]")
+    assert page.is_checked("#anchor") and not page.is_checked("#fast-start")
+    body = page.evaluate("() => Create.jobBody(formState())")
+    assert body["options"] == {**OPTIONS, "anchor": "pursuit"} and "recipe" not in body
+    page.check("#fast-start")
+    assert page.is_disabled("#anchor") and not page.is_checked("#anchor")
+    page.goto("/garage/new")
+    page.wait_for_selector("#create-form[data-ready=true]")
+    assert page.is_disabled("#anchor")  # nothing to stay near: not a clone
     page.wait_for_load_state("networkidle")
     assert violations(page, console) == []
 

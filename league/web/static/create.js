@@ -23,6 +23,7 @@ const Create = {
     if (form.description.trim()) body.description = form.description.trim();
     if (form.recipe) body.recipe = form.recipe;
     if (form.hyperparameters && Object.keys(form.hyperparameters).length) body.hyperparameters = form.hyperparameters;
+    if (form.anchor) body.options.anchor = "pursuit";
     if (form.cloneOf) body.clone_of = form.cloneOf;
     return body;
   },
@@ -165,6 +166,19 @@ function updateFastStart() {
     : `No fast start for ${raceType}${cloneOf ? "" : " unless you clone a run"}.`;
 }
 
+// The anchor (PPO held near the scripted driver) is for a clone, and not with fast start:
+// imitation already copies the driver.
+function updateAnchor() {
+  const box = $("anchor");
+  box.disabled = !cloneOf || $("fast-start").checked;
+  if (box.disabled) box.checked = false;
+  $("anchor-note").textContent = !cloneOf
+    ? "For a clone: it keeps what the cloned run learned."
+    : $("fast-start").checked
+      ? "Not with fast start, which already imitates the scripted driver."
+      : "Your reward trains the car, and every update is also pulled toward the league's scripted driver, so the clean driving the cloned run learned by fast start is kept while the reward improves on it.";
+}
+
 function hyperparameterField(spec) {
   const id = `hp-${spec.name}`;
   const input = spec.choices
@@ -195,6 +209,7 @@ function formState() {
     hyperparameters: Create.changedValues(hyperparameterValues(), catalogue.hyperparameters),
     minutes: Number($("minutes").value),
     recipe: fast ? fast.name : null,
+    anchor: $("anchor").checked,
     cloneOf,
   };
 }
@@ -264,7 +279,10 @@ function fillFrom(job) {
   if (job.reward_source) editor.setValue(job.reward_source);
   updateSensors();
   updateFastStart();
-  $("fast-start").checked = Boolean(job.recipe) && !$("fast-start").disabled;
+  // A clone of an imitation (fast start) run learns from the reward, held near the driver.
+  $("fast-start").checked = false;
+  updateAnchor();
+  $("anchor").checked = !$("anchor").disabled && (Boolean(job.recipe) || Boolean(o.anchor));
   $("clone-note").textContent =
     `Cloning training job ${job.id} (${job.name}): training starts from its run.` +
     (job.reward_source ? "" : " Its reward function is not shown here: pick or write one below.");
@@ -294,12 +312,15 @@ function build() {
   loadSample();
   updateSensors();
   updateFastStart();
+  updateAnchor();
 
   $("tracks").addEventListener("change", updateTrackDirection);
   $("race-types").addEventListener("change", () => {
     updateRaceSettings();
     updateFastStart();
+    updateAnchor();
   });
+  $("fast-start").addEventListener("change", updateAnchor);
   $("sensors").addEventListener("change", updateSensors);
   $("reward-load").addEventListener("click", loadSample);
   $("validate").addEventListener("click", validate);
