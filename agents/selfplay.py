@@ -132,8 +132,14 @@ class OpponentPool:
             del self.entries[old]
 
     def add_policy(self, path: str | Path) -> str:
-        """Add a user policy (``.onnx`` or submission ``.zip``); returns its pool name."""
-        name = f"user:{Path(path).name}"
+        """Add a user policy (``.onnx`` or submission ``.zip``); returns its pool name:
+        ``user:`` and the file's name, numbered from ``#2`` when another has the name (two
+        runs' ``model.zip``)."""
+        base = name = f"user:{Path(path).name}"
+        count = 1
+        while name in self.entries:
+            count += 1
+            name = f"{base}#{count}"
         self.entries[name] = _Entry(read_policy_graph(path), snapshot=False)
         return name
 

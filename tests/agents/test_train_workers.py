@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -236,6 +237,18 @@ def test_pool_records_outcomes_as_a_moving_average():
     for _ in range(98):
         pool.record("a", True)
     assert pool.win_rates()["a"] == pytest.approx(1.0 - (1.0 - 0.525 * 0.95) * 0.95**98)
+
+
+def test_user_policies_of_the_same_file_name_each_keep_a_place(tmp_path):
+    """Two runs' ``model.zip`` (the time-trial parent and the imitation run) both race."""
+    pool = OpponentPool()
+    for run in ("parent", "imitation"):
+        (tmp_path / run).mkdir()
+        with zipfile.ZipFile(tmp_path / run / "model.zip", "w") as archive:
+            archive.writestr("policy.onnx", run.encode())
+    names = [pool.add_policy(tmp_path / run / "model.zip") for run in ("parent", "imitation")]
+    assert names == ["user:model.zip", "user:model.zip#2"]
+    assert {o.graph for o in pool.sample(100)} == {b"parent", b"imitation"}
 
 
 def test_pool_keeps_the_newest_8_snapshots_and_every_user_policy(tmp_path):
