@@ -35,6 +35,7 @@ from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
 from arena.env import RacingEnv
 from arena.params import RewardRaised
+from arena.policy import policy_action
 from arena.simtrace import simtrace_row, step_facts
 
 # Head to model: how far from a racing rival a restarted car starts, metres along the track,
@@ -258,9 +259,7 @@ class EnvGroup:
         driver = self.drivers.get((i, car))
         if driver is None:
             raise RuntimeError(f"race {i}: car {car!r} has neither a learner slot nor an opponent")
-        if getattr(driver, "needs_params", False):
-            return driver.act(self.last_obs[(i, car)], self.last_info[(i, car)]["params"])
-        return driver.act(self.last_obs[(i, car)])
+        return policy_action(driver, self.last_obs[(i, car)], self.last_info[(i, car)])
 
     def _episode_stats(self, i: int, car: str, slot: _Slot, info: dict[str, Any]) -> dict:
         lap_complete = info["episode_status"] == "lap_complete"

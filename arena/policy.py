@@ -21,3 +21,11 @@ class Policy(Protocol):
 
     def act(self, observation: dict[str, Any]) -> Any:
         """Choose the next action."""
+
+
+def policy_action(policy: Policy, observation: dict[str, Any], info: dict[str, Any]) -> Any:
+    """``policy``'s action for a car's ``observation``; a policy that sets ``needs_params``
+    (the scripted drivers, which read the track's geometry) also gets ``info["params"]``."""
+    if getattr(policy, "needs_params", False):
+        return policy.act(observation, params=info["params"])
+    return policy.act(observation)

@@ -21,7 +21,7 @@ from gymnasium import spaces
 
 from arena.config import RaceConfig
 from arena.env import RacingEnv, RewardFunction
-from arena.policy import Policy
+from arena.policy import Policy, policy_action
 from arena.racing_metrics import CarStep, RacingMetrics
 from arena.simtrace import StepFacts, step_facts
 
@@ -171,12 +171,6 @@ class RaceResult:
         )
 
 
-def _act(policy: Policy, observation: dict[str, Any], info: dict[str, Any]) -> Any:
-    if getattr(policy, "needs_params", False):
-        return policy.act(observation, params=info["params"])
-    return policy.act(observation)
-
-
 def _idle(space: spaces.Space) -> Any:
     """An action of ``space`` for a car that has none of its own (retired on its first step)."""
     return 0 if isinstance(space, spaces.Discrete) else np.zeros(space.shape, np.float32)
@@ -197,10 +191,10 @@ class _Steward:
         if name in self.reasons:
             return self._last.get(name, _idle(self.env.action_space(name)))
         if self.guard.cars is not None and name not in self.guard.cars:
-            return _act(policy, observation, info)
+            return policy_action(policy, observation, info)
         start = time.thread_time()
         try:
-            action = _act(policy, observation, info)
+            action = policy_action(policy, observation, info)
         except self.guard.faults as exc:
             self._retire(name, f"model fault: {exc}")
             return self._last.get(name, _idle(self.env.action_space(name)))
