@@ -176,7 +176,7 @@ function updateAnchor() {
     ? "For a clone: it keeps what the cloned run learned."
     : $("fast-start").checked
       ? "Not with fast start, which already imitates the scripted driver."
-      : "Your reward trains the car, and every update is also pulled toward the league's scripted driver, so the clean driving the cloned run learned by fast start is kept while the reward improves on it.";
+      : "Your reward trains the car, and every update is also pulled toward the league's scripted driver: what a fast-start run learned by imitation is kept while the reward improves on it.";
 }
 
 function hyperparameterField(spec) {
