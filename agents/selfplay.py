@@ -3,10 +3,10 @@
 The pool holds frozen snapshots of the learner (exported to ONNX every few iterations),
 any ONNX policies the user adds, and paced racers: the pure-pursuit driver on the racing
 line at a share of the learner's own pace (its laps in its last evaluation), so that it
-meets slower cars to pass and equal ones to race. Each race gets an opponent sampled with PFSP's
-"hard" weighting: an opponent the learner beats with rate ``p`` is drawn with weight
-``(1 - p) ** 2`` (plus a small floor so no opponent is forgotten), so training time goes
-to the opponents the learner still loses to. Win rates are exponential moving averages
+meets slower cars to pass and equal ones to race. Each race gets an opponent sampled
+with PFSP's "hard" weighting: an opponent the learner beats with rate ``p`` is drawn with
+weight ``(1 - p) ** 2`` (plus a small floor so no opponent is forgotten), so training
+time goes to the opponents the learner still loses to. Win rates are exponential moving averages
 of episode outcomes (see :class:`agents.vecenv.EnvGroup` for what counts as a win).
 Bots (head-to-bot) and boxes (object avoidance) come from the race config instead.
 """
