@@ -24,6 +24,7 @@ PYTHON_ONLY = ("steps_per_env", "eval_laps", "stop_on_clean_eval", "snapshot_eve
 # Fields whose command-line form is not the field's type: (type, default) on the command line.
 _FORMS: dict[str, tuple[Any, Any]] = {
     "sensors": (str | None, None),  # comma-separated; default from an action-space file
+    "also_tracks": (str, ""),  # comma-separated track names
     "action_space": (str, "default"),  # a spec (agents.action_spaces)
     "opponent": (list[Path] | None, None),  # repeatable
     "paced_rivals": (  # comma-separated shares, or "none"
@@ -76,6 +77,7 @@ def settings_from_options(options: Mapping[str, Any], **python_only: Any) -> Tra
         reward_fn = str(Path(reward_fn).resolve())
     parsed = {
         "sensors": _sensors(given["sensors"], given["action_space"]),
+        "also_tracks": tuple(t.strip() for t in given["also_tracks"].split(",") if t.strip()),
         "action_space": parse_action_space_spec(given["action_space"]),
         "reward_fn": reward_fn,
         "opponent": tuple(str(Path(p).resolve()) for p in given["opponent"] or ()),

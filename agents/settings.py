@@ -46,6 +46,11 @@ class TrainSettings(BaseModel):
     direction: Direction | None = Field(
         None, description="ccw or cw (default: the way the track's file runs)."
     )
+    also_tracks: tuple[str, ...] = Field(
+        (),
+        description="Further tracks the training races run on (comma-separated): the races "
+        "take --track and these in turn, at least one race each; evaluations stay on --track.",
+    )
     race_type: RaceType = Field("time_trial", description=" | ".join(RACE_TYPES))
     boxes: int | None = Field(
         None, description=f"object_avoidance: boxes on the track (default {_BOXES.count})."
@@ -185,6 +190,18 @@ class TrainSettings(BaseModel):
         if outside:
             raise ValueError(f"a share of the learner's pace is in (0, 1], got {outside[0]}")
         return shares
+
+    @model_validator(mode="after")
+    def _a_race_on_every_track(self) -> TrainSettings:
+        tracks = [self.track, *self.also_tracks]
+        if len(set(tracks)) < len(tracks):
+            raise ValueError(f"a track is named twice in --track and --also-tracks: {tracks}")
+        if self.races is not None and self.races < len(tracks):
+            raise ValueError(
+                f"{len(tracks)} tracks need at least {len(tracks)} races, one on each: "
+                f"give --races {len(tracks)} or more"
+            )
+        return self
 
     @model_validator(mode="after")
     def _anchor_needs_ppo(self) -> TrainSettings:

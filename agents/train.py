@@ -131,7 +131,8 @@ class Trainer:
             )
         self.dr_metrics = TrainingMetricsLog(run_dir, resume=resume)
         networks.check_preset(settings.preset, settings.sensors)
-        get_track(settings.track)  # raises TrackNotFoundError (a ValueError)
+        for track in (settings.track, *settings.also_tracks):
+            get_track(track)  # raises TrackNotFoundError (a ValueError)
         self.target.reward  # noqa: B018 (resolved here: a broken reward fails early)
         self.start_iteration = 0
         self.elapsed_before = 0.0
@@ -187,6 +188,7 @@ class Trainer:
             device=s.device,
             privileged=s.critic == "privileged" and s.teacher is None,
             expert=s.teacher is not None or s.anchor is not None,
+            also_tracks=s.also_tracks,
         )
         return env, pool
 

@@ -37,6 +37,7 @@ from tracks.catalog import builtin_names
 
 JOB_OPTIONS = (
     "track",
+    "also_tracks",
     "direction",
     "race_type",
     "boxes",
@@ -77,12 +78,16 @@ def check_options(options: Mapping[str, Any]) -> None:
         raise ValueError(
             f"a training job cannot set {', '.join(unknown)}; it may set {', '.join(JOB_OPTIONS)}"
         )
-    track = options.get("track")
-    if track is not None and track not in builtin_names():
-        raise ValueError(
-            f"track {track!r}: a training job races a built-in track, one of "
-            f"{', '.join(builtin_names())}"
-        )
+    also = options.get("also_tracks", "")
+    if not isinstance(also, str):
+        raise ValueError("also_tracks: give the track names comma-separated in one string")
+    named = [options.get("track"), *(t.strip() for t in also.split(",") if t.strip())]
+    for track in named:
+        if track is not None and track not in builtin_names():
+            raise ValueError(
+                f"track {track!r}: a training job races built-in tracks, "
+                f"{', '.join(builtin_names())}"
+            )
     space = str(options.get("action_space") or "default")
     if "/" in space.split(":", 1)[0] or space.endswith(".json"):
         raise ValueError(

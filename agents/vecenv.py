@@ -17,6 +17,7 @@ import threading
 import time
 import traceback
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -103,7 +104,8 @@ class EnvGroup:
     ``episode_of_slot * total_slots + global_slot``, unique across groups and increasing
     per slot. ``privileged`` adds the :data:`~agents.privileged.PRIVILEGED_GROUP` to the
     observations (for a privileged critic), ``expert`` the teacher's actions
-    (:data:`~agents.imitation.EXPERT_GROUP`, for imitation).
+    (:data:`~agents.imitation.EXPERT_GROUP`, for imitation). ``tracks``, one per seed,
+    puts each race on its own track (default: the config's).
     """
 
     def __init__(
@@ -117,12 +119,14 @@ class EnvGroup:
         total_slots: int | None = None,
         privileged: bool = False,
         expert: bool = False,
+        tracks: list[str] | None = None,
     ) -> None:
         config = RaceConfig.from_json(config_json)
         reward_fn = resolve_reward(reward, config.race_type)
+        tracks = tracks or [config.track] * len(seeds)
         self.envs = [
-            RacingEnv(config.model_copy(update={"seed": s}), reward_functions=reward_fn)
-            for s in seeds
+            RacingEnv(config.model_copy(update={"seed": s, "track": t}), reward_functions=reward_fn)
+            for s, t in zip(seeds, tracks, strict=True)
         ]
         self.learners = set(learner_cars)
         pairs = [(i, car) for i in range(len(self.envs)) for car in learner_cars]
@@ -358,6 +362,8 @@ class RacingVecEnv(VecEnv):
         privileged: add the privileged-state group (``agents.privileged``) to the
             observations, for a critic that reads it.
         expert: add the teacher's actions (``agents.imitation``), for imitation.
+        also_tracks: further tracks: the races take ``config.track`` and these in turn,
+            and there are at least as many races as tracks.
     """
 
     def __init__(
@@ -372,11 +378,19 @@ class RacingVecEnv(VecEnv):
         record_simtrace: bool = True,
         privileged: bool = False,
         expert: bool = False,
+        also_tracks: Sequence[str] = (),
     ) -> None:
         if config.mode != "training":
             raise ValueError("RacingVecEnv needs a training-mode race config")
         workers = (os.cpu_count() or 1) if num_workers is None else num_workers
-        self.num_races = num_races or RACES_PER_WORKER * max(1, workers)
+        tracks = [config.track, *also_tracks]
+        self.num_races = num_races or max(RACES_PER_WORKER * max(1, workers), len(tracks))
+        if self.num_races < len(tracks):
+            raise ValueError(
+                f"{len(tracks)} tracks need at least {len(tracks)} races, one on each; "
+                f"got {self.num_races}"
+            )
+        race_tracks = [tracks[i % len(tracks)] for i in range(self.num_races)]
         self.learner_cars = learner_cars or [c.name for c in config.cars]
         self.config = config
         self.device = device
@@ -398,6 +412,7 @@ class RacingVecEnv(VecEnv):
                 "config_json": config.to_json(),
                 "reward": reward,
                 "seeds": [seeds[i] for i in races],
+                "tracks": [race_tracks[i] for i in races],
                 "learner_cars": self.learner_cars,
                 "record_simtrace": record_simtrace,
                 "slot_offset": offsets[w],

@@ -25,7 +25,7 @@ from agents.settings import (
 SPACE = parse_action_space_spec("3x3@1.0")
 NOT_SETTINGS = {"out", "recipe", "list_recipes", "clone", "resume", "hyperparameters"}
 # Options whose command-line form differs from the field's type (agents.options).
-PARSED = {"sensors", "action_space", "opponent", "paced_rivals"}
+PARSED = {"sensors", "action_space", "opponent", "paced_rivals", "also_tracks"}
 
 
 def _train_options() -> dict[str, TyperOption]:
@@ -82,6 +82,18 @@ def test_paced_rivals_default_to_four_shares_and_none_turns_them_off():
         ValidationError, match=r"share of the learner's pace is in \(0, 1\], got 1.2"
     ):
         settings_from_options({"paced_rivals": "0.8,1.2"})
+
+
+def test_also_tracks_are_comma_separated_and_need_a_race_each():
+    settings = settings_from_options(
+        {"track": "slipstream_speedway", "also_tracks": "grand_tour, hairpin_hollow"}
+    )
+    assert settings.also_tracks == ("grand_tour", "hairpin_hollow")
+    assert settings_from_options({}).also_tracks == ()
+    with pytest.raises(ValidationError, match="named twice"):
+        settings_from_options({"track": "grand_tour", "also_tracks": "grand_tour"})
+    with pytest.raises(ValidationError, match=r"3 tracks need at least 3 races.*--races 3"):
+        settings_from_options({"also_tracks": "grand_tour,slipstream_speedway", "races": 2})
 
 
 def test_resume_keeps_the_run_settings_but_the_overrides(tmp_path):

@@ -82,6 +82,34 @@ def test_default_races_share_each_worker():
         env.close()
 
 
+def test_races_take_the_tracks_in_turn():
+    """``also_tracks`` puts the races on ``--track`` and the further tracks in turn, each
+    race driven and judged on its own track."""
+    env = RacingVecEnv(
+        _config(sensors=("lidar",)),
+        "follow_center_line",
+        num_races=3,
+        num_workers=0,
+        also_tracks=["slipstream_speedway"],
+    )
+    try:
+        tracks = [race.track.name for race in env._local.envs]
+        assert tracks == ["beginner_loop", "slipstream_speedway", "beginner_loop"]
+        _drive(env, 20, index=SPACE.n // 2)
+        lengths = [env._local.last_info[(i, "car0")]["params"]["track_length"] for i in range(3)]
+        assert lengths[0] == lengths[2] != lengths[1]
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match="3 tracks need at least 3 races"):
+        RacingVecEnv(
+            _config(sensors=("lidar",)),
+            "follow_center_line",
+            num_races=2,
+            num_workers=0,
+            also_tracks=["slipstream_speedway", "grand_tour"],
+        )
+
+
 def test_camera_and_continuous_actions():
     space = ContinuousActionSpace()
     env = RacingVecEnv(

@@ -98,7 +98,14 @@ def test_validate_checks_a_job_without_queuing_it(league: League) -> None:
     broken = "def reward_function(params):\n    return params['no_such_key']\n"
     with league.client("alice") as alice:
         assert alice.post("/api/training-jobs/check", json=_body()).json() == {"ok": True}
-        anchored = _body(options={"anchor": "pursuit", "anchor_weight": 0.5, "critic_warmup": 3})
+        anchored = _body(
+            options={
+                "anchor": "pursuit",
+                "anchor_weight": 0.5,
+                "critic_warmup": 3,
+                "also_tracks": "grand_tour",
+            }
+        )
         assert alice.post("/api/training-jobs/check", json=anchored).json() == {"ok": True}
         refused = alice.post("/api/training-jobs/check", json=_body(broken))
         assert refused.status_code == 422 and "at line 2" in refused.json()["detail"]
@@ -108,7 +115,8 @@ def test_validate_checks_a_job_without_queuing_it(league: League) -> None:
 @pytest.mark.parametrize(
     ("options", "expected"),
     [
-        ({"track": "no_such_track"}, "built-in track"),
+        ({"track": "no_such_track"}, "built-in tracks"),
+        ({"also_tracks": "grand_tour,/tmp/my_track.csv"}, "built-in tracks"),
         ({"action_space": "/etc/passwd"}, "not a file"),
         ({"workers": 16}, "cannot set workers"),
         ({"reward_fn": "/etc/shadow"}, "cannot set reward_fn"),
