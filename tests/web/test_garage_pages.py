@@ -104,6 +104,7 @@ def test_the_garage_lists_the_racers_jobs_and_models_and_acts_on_them(
     assert body["clone_of"] == clone and body["name"] == "garage-parent-clone"
     assert body["options"] == OPTIONS and body["hyperparameters"] == {"lr": 0.001}
     assert not page.is_checked("#anchor")  # its parent learned from its reward alone
+    assert page.is_disabled("#anchor-weight")
 
     # A clone of a fast-start (imitation) job learns from its reward by PPO, held near
     # the scripted driver; fast start and the anchor exclude each other.
@@ -117,8 +118,12 @@ def test_the_garage_lists_the_racers_jobs_and_models_and_acts_on_them(
     assert page.is_checked("#anchor") and not page.is_checked("#fast-start")
     body = page.evaluate("() => Create.jobBody(formState())")
     assert body["options"] == {**OPTIONS, "anchor": "pursuit"} and "recipe" not in body
+    page.fill("#anchor-weight", "0.5")  # how strongly: sent only when not the default 1
+    body = page.evaluate("() => Create.jobBody(formState())")
+    assert body["options"] == {**OPTIONS, "anchor": "pursuit", "anchor_weight": 0.5}
     page.check("#fast-start")
     assert page.is_disabled("#anchor") and not page.is_checked("#anchor")
+    assert page.is_disabled("#anchor-weight")
     page.goto("/garage/new")
     page.wait_for_selector("#create-form[data-ready=true]")
     assert page.is_disabled("#anchor")  # nothing to stay near: not a clone

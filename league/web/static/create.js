@@ -24,6 +24,7 @@ const Create = {
     if (form.recipe) body.recipe = form.recipe;
     if (form.hyperparameters && Object.keys(form.hyperparameters).length) body.hyperparameters = form.hyperparameters;
     if (form.anchor) body.options.anchor = "pursuit";
+    if (form.anchor && form.anchorWeight !== 1) body.options.anchor_weight = form.anchorWeight;
     if (form.cloneOf) body.clone_of = form.cloneOf;
     return body;
   },
@@ -172,11 +173,12 @@ function updateAnchor() {
   const box = $("anchor");
   box.disabled = !cloneOf || $("fast-start").checked;
   if (box.disabled) box.checked = false;
+  $("anchor-weight").disabled = !box.checked;
   $("anchor-note").textContent = !cloneOf
     ? "For a clone: it keeps what the cloned run learned."
     : $("fast-start").checked
       ? "Not with fast start, which already imitates the scripted driver."
-      : "Your reward trains the car, and every update is also pulled toward the league's scripted driver: what a fast-start run learned by imitation is kept while the reward improves on it.";
+      : "Your reward trains the car, and every update is also pulled toward the league's scripted driver: what a fast-start run learned by imitation is kept while the reward improves on it. How strongly: 1 by default; 0 leaves your reward alone, more keeps the car closer to the driver.";
 }
 
 function hyperparameterField(spec) {
@@ -210,6 +212,7 @@ function formState() {
     minutes: Number($("minutes").value),
     recipe: fast ? fast.name : null,
     anchor: $("anchor").checked,
+    anchorWeight: Number($("anchor-weight").value),
     cloneOf,
   };
 }
@@ -283,6 +286,8 @@ function fillFrom(job) {
   $("fast-start").checked = false;
   updateAnchor();
   $("anchor").checked = !$("anchor").disabled && (Boolean(job.recipe) || Boolean(o.anchor));
+  if (o.anchor_weight !== undefined) $("anchor-weight").value = o.anchor_weight;
+  updateAnchor();
   $("clone-note").textContent =
     `Cloning training job ${job.id} (${job.name}): training starts from its run.` +
     (job.reward_source ? "" : " Its reward function is not shown here: pick or write one below.");
@@ -321,6 +326,7 @@ function build() {
     updateAnchor();
   });
   $("fast-start").addEventListener("change", updateAnchor);
+  $("anchor").addEventListener("change", updateAnchor);
   $("sensors").addEventListener("change", updateSensors);
   $("reward-load").addEventListener("click", loadSample);
   $("validate").addEventListener("click", validate);
