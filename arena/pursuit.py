@@ -253,17 +253,22 @@ HAZARD_S = 0.3
 HAZARD_ANGLE_DEG = 25.0
 # A car whose lateral offset stayed within ON_LINE_M of the racing line's (mean over the
 # memory) races the line: it brakes for the corners, takes their apexes and drives a
-# steady share of the profile's speed (the median share: a lagging car's share swings
-# 0.55-0.8 round a corner at 80% pace, and the lowest of them took it for a 55% car and
-# started passes into every corner). Such a car is passed along a lane CAR_CLEARANCE_M
-# beside the line (:class:`_Lane`), at that lane's own speed profile, and only where the
-# lane stays on the road while the cars overlap (the line runs along the edges, so one
-# side of it has no room at every apex and straight end). 0.15 m: the pursuit drivers
-# stray up to about 0.1 m from their line. Only on a track where a car fits beside one on
-# the centre line (room >= CAR_CLEARANCE_M: DeepRacer's 1.07 m, not the 0.76 m loop, where
-# the loop's lane-following bots stay within ON_LINE_M of the line and this rule ran into
-# them 16 times in 5 races against 10 before).
+# steady share of the profile's speed (the LINE_SHARE_QUANTILE of its shares: a lagging
+# car's share swings 0.55-0.8 round a corner at 80% pace, and the lowest of them took it
+# for a 55% car and started passes into every corner). Such a car is passed along a lane
+# CAR_CLEARANCE_M beside the line (:class:`_Lane`), at that lane's own speed profile, and
+# only where the lane stays on the road while the cars overlap (the line runs along the
+# edges, so one side of it has no room at every apex and straight end). 0.15 m: the
+# pursuit drivers stray up to about 0.1 m from their line. Only on a track where a car
+# fits beside one on the centre line (room >= CAR_CLEARANCE_M: DeepRacer's 1.07 m, not the
+# 0.76 m loop, where the loop's lane-following bots stay within ON_LINE_M of the line and
+# this rule ran into them 16 times in 5 races against 10 before).
 ON_LINE_M = 0.15
+# The median share still read the 80% racer as a 68% one leaving the speedway's hairpin
+# (pursuit cuts the apex and exits slower than its profile), and started a pass there each
+# lap that was given up on the straight; the upper quartile reads it at 0.78-0.88, and
+# following it instead lost 1.43 s a lap to it, not 1.58 (h2h_gauntlet.py, 6 races).
+LINE_SHARE_QUANTILE = 0.75
 # Beside such a car the car aims this much wider than CAR_CLEARANCE_M: pursuit cuts a
 # corner's inside by about 0.1 m, and on the outside of the speedway's first corner at 60%
 # it closed to 0.2 m from the rival (centre to centre, the cars 0.196 m wide) and hit it.
@@ -389,8 +394,9 @@ class _Seen:
 
     @property
     def line_share(self) -> float:
-        """The median share of the profile's speed it drove at over the memory."""
-        return float(np.median(self.shares))
+        """The :data:`LINE_SHARE_QUANTILE` of the shares of the profile's speed it drove
+        at over the memory."""
+        return float(np.quantile(self.shares, LINE_SHARE_QUANTILE))
 
     def lateral_speed(self) -> float:
         """Its speed across the track over the last two steps (m/s, left positive)."""
@@ -452,10 +458,17 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         self._after_box = False  # rejoining the line after a box (at PASS_SPEED)
 
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
-        """The racing-line command, or one aimed beside an object in the way."""
+        """The racing-line command, or one aimed beside an object in the way.
+
+        Aimed beside a car that races the line, the car asks for the profile's speed
+        capped by the arc it steers there, not by the arc it would steer back to the line
+        (that halved its speed beside the line leaving the speedway's hairpin; behind
+        the 60% racer there it lost 0.63 s a lap, not 2.11).
+        """
         steer, speed = super().command_for(params)
         self._steps += 1
         self._aim_within = math.inf
+        self._lane_aim = False  # aiming beside a car that races the line (_past_car)
         self._observe(params)
         way = self._way_past(params, speed)
         if way is None:
@@ -474,6 +487,9 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         target, _ = self.track.pose_at(self.track.wrap_arc_length(arc), offset)
         wheelbase = self.limits.wheelbase_at(params["speed"])
         steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
+        if self._lane_aim:  # the profile's speed, not capped by the arc back to the line
+            ahead = self.lookahead + self.lookahead_per_speed * max(params["speed"], 0.0)
+            speed = self.pace * min(self._ahead(rear, ahead)[1], self.max_speed)
         return steer, min(speed, most, self.arc_speed(steer, params["speed"]))
 
     def _observe(self, params: dict[str, Any]) -> None:
@@ -565,6 +581,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             side = self._racer_side(i, gap, here, arc, seen)
             if side is not None:
                 self._passing, self._side = i, side
+                self._lane_aim = True
                 wide = CAR_CLEARANCE_M + PURSUIT_CUT_M
                 aside = float(np.clip(seen.offsets[-1] + side * wide, -self._room, self._room))
                 return aside, self._lanes[side].speed(arc)
@@ -647,7 +664,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
 
         Played forward a control step at a time: this car at :data:`PASS_LINE_SHARE` of
         the lane's profile speed, reached at its acceleration and braking limits from its
-        measured speed; the rival on the line at its median share of the line's profile
+        measured speed; the rival on the line at its usual share of the line's profile
         speed (:attr:`_Seen.line_share`). Each moves along the centre line at its speed
         times its path's stretch (a corner's inside is shorter than its outside).
         """
