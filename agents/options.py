@@ -77,13 +77,18 @@ def settings_from_options(options: Mapping[str, Any], **python_only: Any) -> Tra
         reward_fn = str(Path(reward_fn).resolve())
     parsed = {
         "sensors": _sensors(given["sensors"], given["action_space"]),
-        "also_tracks": tuple(t.strip() for t in given["also_tracks"].split(",") if t.strip()),
+        "also_tracks": comma_separated(given["also_tracks"]),
         "action_space": parse_action_space_spec(given["action_space"]),
         "reward_fn": reward_fn,
         "opponent": tuple(str(Path(p).resolve()) for p in given["opponent"] or ()),
         "paced_rivals": _shares(given["paced_rivals"]),
     }
     return TrainSettings(**{**given, **parsed, **python_only})
+
+
+def comma_separated(option: str) -> tuple[str, ...]:
+    """The non-empty, stripped items of a comma-separated option (``--also-tracks``)."""
+    return tuple(item.strip() for item in option.split(",") if item.strip())
 
 
 def _shares(option: str) -> tuple[float, ...]:

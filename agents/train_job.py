@@ -30,7 +30,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from agents.options import settings_from_options
+from agents.options import comma_separated, settings_from_options
 from agents.recipes import get_recipe
 from agents.settings import TrainSettings
 from tracks.catalog import builtin_names
@@ -81,7 +81,7 @@ def check_options(options: Mapping[str, Any]) -> None:
     also = options.get("also_tracks", "")
     if not isinstance(also, str):
         raise ValueError("also_tracks: give the track names comma-separated in one string")
-    named = [options.get("track"), *(t.strip() for t in also.split(",") if t.strip())]
+    named = [options.get("track"), *comma_separated(also)]
     for track in named:
         if track is not None and track not in builtin_names():
             raise ValueError(
