@@ -127,6 +127,17 @@ def test_the_garage_lists_the_racers_jobs_and_models_and_acts_on_them(
     page.goto("/garage/new")
     page.wait_for_selector("#create-form[data-ready=true]")
     assert page.is_disabled("#anchor")  # nothing to stay near: not a clone
+    # Further tracks for the training races: any but the chosen one, sent comma-separated.
+    page.click("label[for=track-slipstream_speedway]")
+    assert page.is_disabled("#also-track-slipstream_speedway")
+    page.check("#also-track-grand_tour")
+    page.check("#also-track-hairpin_hollow")
+    options = page.evaluate("() => Create.jobBody(formState())")["options"]
+    assert options["track"] == "slipstream_speedway"
+    assert options["also_tracks"] == "hairpin_hollow,grand_tour"  # the catalogue's order
+    page.click("label[for=track-grand_tour]")
+    assert page.is_disabled("#also-track-grand_tour")
+    assert not page.is_checked("#also-track-grand_tour")
     page.wait_for_load_state("networkidle")
     assert violations(page, console) == []
 

@@ -25,6 +25,7 @@ const Create = {
     if (form.hyperparameters && Object.keys(form.hyperparameters).length) body.hyperparameters = form.hyperparameters;
     if (form.anchor) body.options.anchor = "pursuit";
     if (form.anchor && form.anchorWeight !== 1) body.options.anchor_weight = form.anchorWeight;
+    if (form.alsoTracks.length) body.options.also_tracks = form.alsoTracks.join(",");
     if (form.cloneOf) body.clone_of = form.cloneOf;
     return body;
   },
@@ -119,9 +120,19 @@ function updateSensors() {
   $("sensor-note").className = valid ? "muted" : "error";
 }
 
+// The chosen track's own direction; it cannot also be a further track.
 function updateTrackDirection() {
   const track = catalogue.tracks.find((t) => t.name === checked("track"));
   if (track) $("direction").value = track.direction;
+  for (const box of document.querySelectorAll('input[name="also_track"]')) {
+    box.disabled = box.value === checked("track");
+    if (box.disabled) box.checked = false;
+  }
+}
+
+function alsoTrackBox(track) {
+  const id = `also-track-${track.name}`;
+  return Slip.el("label", { for: id }, Slip.el("input", { type: "checkbox", name: "also_track", id, value: track.name }), " ", track.display_name);
 }
 
 function raceSettingSpecs() {
@@ -202,6 +213,7 @@ function formState() {
     name: $("model-name").value,
     description: $("model-description").value,
     track: checked("track"),
+    alsoTracks: Array.from(document.querySelectorAll('input[name="also_track"]:checked'), (n) => n.value),
     direction: $("direction").value,
     raceType: checked("race_type"),
     raceSettings: raceSettingValues(),
@@ -266,6 +278,7 @@ function fillFrom(job) {
   if (o.track) setChecked("track", o.track);
   updateTrackDirection();
   if (o.direction) $("direction").value = o.direction;
+  for (const name of String(o.also_tracks || "").split(",")) if (name) setChecked("also_track", name);
   if (job.description) $("model-description").value = job.description;
   if (o.race_type) setChecked("race_type", o.race_type);
   updateRaceSettings(o);
@@ -296,6 +309,7 @@ function fillFrom(job) {
 function build() {
   const d = catalogue.defaults;
   $("tracks").replaceChildren(...catalogue.tracks.map(trackCard));
+  $("also-tracks").append(...catalogue.tracks.map(alsoTrackBox));
   $("race-types").replaceChildren(...catalogue.race_types.map(raceTypeCard));
   $("sensors").replaceChildren(
     ...catalogue.sensors.choices.map((s) => Slip.el("label", {}, Slip.el("input", { type: "checkbox", name: "sensor", value: s }), " ", s.replace(/_/g, " "))),
