@@ -153,7 +153,11 @@ class PurePursuitPolicy:
         """The car's yaw (rad), rear-axle point and lookahead distance at ``speed``."""
         yaw = math.radians(heading_deg)
         rear = np.array(DEFAULT_CAR.rear_axle(x, y, yaw))
-        return yaw, rear, self.lookahead + self.lookahead_per_speed * max(speed, 0.0)
+        return yaw, rear, self._lookahead_at(speed)
+
+    def _lookahead_at(self, speed: float) -> float:
+        """The pursuit distance (m) at ``speed``."""
+        return self.lookahead + self.lookahead_per_speed * max(speed, 0.0)
 
     def _ahead(self, point: np.ndarray, distance: float) -> tuple[np.ndarray, float]:
         """The racing-line point ``distance`` metres past the line point nearest ``point``
@@ -488,8 +492,8 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         wheelbase = self.limits.wheelbase_at(params["speed"])
         steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
         if self._lane_aim:  # the profile's speed, not capped by the arc back to the line
-            ahead = self.lookahead + self.lookahead_per_speed * max(params["speed"], 0.0)
-            speed = self.pace * min(self._ahead(rear, ahead)[1], self.max_speed)
+            profile = self._ahead(rear, self._lookahead_at(params["speed"]))[1]
+            speed = self.pace * min(profile, self.max_speed)
         return steer, min(speed, most, self.arc_speed(steer, params["speed"]))
 
     def _observe(self, params: dict[str, Any]) -> None:
