@@ -36,7 +36,7 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
-from agents.networks import images_pooled_once
+from agents.networks import channels_last, images_pooled_once
 
 # Largest weight of a sample's advantage, pi_prox / mu, in an overlapped update: a bound
 # on the variance one rare action of the collecting policy can add.
@@ -153,6 +153,8 @@ class RacingRunner(OnPolicyRunner):
         # into log_dir/git; installed in a checkout's virtualenv that would be the
         # project's diff, which has no place in a run folder.
         self.logger.git_status_repos.clear()
+        if not self.device.startswith("cuda"):  # measured on CPUs only
+            channels_last([m for m in vars(self.alg).values() if isinstance(m, torch.nn.Module)])
         self._obs: TensorDict | None = None
         self.timings = IterationTimings()  # the last iteration's
         self.staleness = 0.0  # the mean |w - 1| the last overlapped update corrected

@@ -119,6 +119,25 @@ def test_onnx_export_matches_torch(preset, sensors, space):
         np.testing.assert_allclose(onnx_out, torch_out.clamp(-1, 1).numpy(), atol=1e-5)
 
 
+def test_channels_last_weights_keep_the_actor_its_outputs_and_its_export():
+    torch.manual_seed(0)
+    actor = networks.build_actor("CPU CNN", ("camera",), CONTINUOUS).eval()
+    raw = example_inputs(("camera",), batch=5, seed=3)
+    with torch.inference_mode():
+        before = actor(networks.observation_groups(raw))
+    state = {k: v.clone() for k, v in actor.state_dict().items()}
+    networks.channels_last([actor])
+    conv = next(m for m in actor.modules() if isinstance(m, torch.nn.Conv2d))
+    assert conv.weight.is_contiguous(memory_format=torch.channels_last)
+    with torch.inference_mode():
+        after = actor(networks.observation_groups(raw))
+    torch.testing.assert_close(after, before, atol=1e-5, rtol=1e-5)
+    assert all(torch.equal(v, state[k]) for k, v in actor.state_dict().items())
+    session = ort.InferenceSession(export_onnx(actor, ("camera",), CONTINUOUS))
+    (onnx_out,) = session.run(None, raw)
+    np.testing.assert_allclose(onnx_out, after.clamp(-1, 1).numpy(), atol=1e-5)
+
+
 def test_pfsp_prefers_opponents_the_learner_loses_to():
     weights = pfsp_weights([0.9, 0.5, 0.1])
     assert weights.sum() == pytest.approx(1.0)
