@@ -14,6 +14,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from agents.settings import SLOTS_PER_WORKER
 from arena.config import validation_problems
 
 # Fixed in DeepRacer's clipped-PPO preset (not user settings there either).
@@ -24,8 +25,8 @@ GAE_LAMBDA = 0.95
 STEPS_PER_EPISODE_ESTIMATE = 64
 # The slots (parallel races x learner cars) whose iteration DeepRacer's numbers describe when
 # the iteration grows with the machine (``to_rsl_rl(grow=True)``): a 2-core machine's
-# default of 2 workers with 2 races each, 320 steps per slot.
-REFERENCE_SLOTS = 4
+# default of 2 workers, 160 steps per slot.
+REFERENCE_SLOTS = 2 * SLOTS_PER_WORKER
 VALUE_LOSS_COEF = 1.0
 # rsl-rl's PPO, learning from rewards scaled by the running std of the return.
 PPO_CLASS = "agents.return_scale:ReturnScaledPPO"

@@ -30,10 +30,12 @@ from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
 RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads", "sync")
-# Parallel races per worker process (or in-process) when ``races`` is not given: each step
-# of a worker carries a fixed cost (pipe, pickling, waking it), which two races share
-# (measured by benchmarks/train_profile.py --races).
-RACES_PER_WORKER = 2
+# Learner cars per worker process (or in-process) when ``races`` is not given. Each step of
+# a worker carries fixed costs (the pipe, waking it, the learner's forward pass and
+# bookkeeping per call) that its cars share; at DeepRacer's default iteration (1,280
+# samples on 2 workers) four a worker still collect 160 steps each, about a lap
+# (benchmarks/RESULTS.md, "Races per worker").
+SLOTS_PER_WORKER = 4
 _BOXES, _BOTS = ObstacleConfig(), BotConfig()  # the league's defaults, named in the help
 
 
@@ -122,8 +124,8 @@ class TrainSettings(BaseModel):
     )
     races: int | None = Field(
         None,
-        description=f"Parallel races (default: {RACES_PER_WORKER} per worker, "
-        f"{RACES_PER_WORKER} in-process).",
+        description=f"Parallel races (default: {SLOTS_PER_WORKER} learner cars per worker, "
+        "or in-process: 4 one-car races, 2 with two learner cars).",
     )
     iterations: int | None = Field(None, description="Iteration budget.")
     minutes: float | None = Field(None, description="Wall-clock budget in minutes.")

@@ -31,7 +31,7 @@ from agents.networks import observation_groups
 from agents.privileged import PRIVILEGED_GROUP, privileged_state
 from agents.rewards import resolve_reward
 from agents.selfplay import Opponent, opponent_driver
-from agents.settings import RACES_PER_WORKER
+from agents.settings import SLOTS_PER_WORKER
 from arena.actions import DiscreteActionSpace
 from arena.config import RaceConfig
 from arena.env import RacingEnv
@@ -353,8 +353,9 @@ class RacingVecEnv(VecEnv):
         config: the race (``mode="training"``); its cars' sensors and action space are the
             learner's.
         reward: path of a reward-function file or a bundled sample's name.
-        num_races: race instances (default: :data:`~agents.settings.RACES_PER_WORKER` per
-            worker, as many in-process).
+        num_races: race instances (default: enough for
+            :data:`~agents.settings.SLOTS_PER_WORKER` learner cars per worker, or
+            in-process, and at least one race per track).
         num_workers: worker processes (default ``os.cpu_count()``; 0 = in-process).
         learner_cars: cars the shared policy drives (default: all); the others need
             opponents (:meth:`set_opponents`).
@@ -384,14 +385,15 @@ class RacingVecEnv(VecEnv):
             raise ValueError("RacingVecEnv needs a training-mode race config")
         workers = (os.cpu_count() or 1) if num_workers is None else num_workers
         tracks = [config.track, *also_tracks]
-        self.num_races = num_races or max(RACES_PER_WORKER * max(1, workers), len(tracks))
+        self.learner_cars = learner_cars or [c.name for c in config.cars]
+        per_worker = max(1, SLOTS_PER_WORKER // len(self.learner_cars))
+        self.num_races = num_races or max(per_worker * max(1, workers), len(tracks))
         if self.num_races < len(tracks):
             raise ValueError(
                 f"{len(tracks)} tracks need at least {len(tracks)} races, one on each; "
                 f"got {self.num_races}"
             )
         race_tracks = [tracks[i % len(tracks)] for i in range(self.num_races)]
-        self.learner_cars = learner_cars or [c.name for c in config.cars]
         self.config = config
         self.device = device
         self.cfg = config.model_dump(mode="json")

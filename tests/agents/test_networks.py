@@ -77,10 +77,10 @@ def test_hyperparameters_map_to_rsl_rl(tmp_path):
 
 
 @pytest.mark.parametrize(("slots", "grow", "samples", "minibatch"), [
-    (4, False, 1280, 64),  # DeepRacer's 20 episodes of 64 steps, batch 64
-    (28, False, 1288, 64),  # as written: the iteration stays about 20 episodes
-    (28, True, 8960, 448),  # grown: 320 steps a slot, each minibatch 7 times larger
-    (2, True, 1280, 64),  # fewer slots than the reference machine's: as written
+    (8, False, 1280, 64),  # DeepRacer's 20 episodes of 64 steps, batch 64
+    (56, False, 1288, 64),  # as written: the iteration stays about 20 episodes
+    (56, True, 8960, 448),  # grown: 160 steps a slot, each minibatch 7 times larger
+    (4, True, 1280, 64),  # fewer slots than the reference machine's: as written
 ])  # fmt: skip
 def test_an_iteration_grows_with_the_races_keeping_deepracers_gradient_steps(
     slots: int, grow: bool, samples: int, minibatch: int

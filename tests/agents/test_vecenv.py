@@ -12,7 +12,7 @@ import arena
 from agents import networks
 from agents.export import export_onnx
 from agents.selfplay import Opponent
-from agents.settings import RACES_PER_WORKER
+from agents.settings import SLOTS_PER_WORKER
 from agents.vecenv import GRID_EVERY, PASS_GAP_M, RacingVecEnv
 from arena.actions import ContinuousActionSpace, default_discrete_space
 from arena.spawn import GRID_GAP_M
@@ -71,13 +71,19 @@ def test_shapes_dones_and_auto_reset(workers):
 
 
 def test_default_races_share_each_worker():
-    """Without ``num_races``, every worker (or the trainer, in-process) steps
-    ``RACES_PER_WORKER`` races, each with its own seed."""
+    """Without ``num_races``, every worker (or the trainer, in-process) steps races for
+    ``SLOTS_PER_WORKER`` learner cars, each race with its own seed."""
     env = RacingVecEnv(_config(sensors=("lidar",)), "follow_center_line", num_workers=0)
     try:
-        assert env.num_races == env.num_envs == RACES_PER_WORKER > 1
+        assert env.num_races == env.num_envs == SLOTS_PER_WORKER > 1
         seeds = [race.config.seed for race in env._local.envs]
-        assert seeds[0] == 3 and len(set(seeds)) == RACES_PER_WORKER
+        assert seeds[0] == 3 and len(set(seeds)) == SLOTS_PER_WORKER
+    finally:
+        env.close()
+    two_learners = _config(race_type="head_to_model", num_cars=2, sensors=("lidar",))
+    env = RacingVecEnv(two_learners, "follow_center_line", num_workers=0)
+    try:
+        assert env.num_envs == SLOTS_PER_WORKER and env.num_races == SLOTS_PER_WORKER // 2
     finally:
         env.close()
 
