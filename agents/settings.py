@@ -33,7 +33,7 @@ RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads", "sy
 # Learner cars per worker process (or in-process) when ``races`` is not given. Each step of
 # a worker carries fixed costs (the pipe, waking it, the learner's forward pass and
 # bookkeeping per call) that its cars share; at DeepRacer's default iteration (1,280
-# samples on 2 workers) four a worker still collect 160 steps each, about a lap
+# samples on 2 workers) each of a worker's four cars still collects 160 steps, about a lap
 # (benchmarks/RESULTS.md, "Races per worker").
 SLOTS_PER_WORKER = 4
 _BOXES, _BOTS = ObstacleConfig(), BotConfig()  # the league's defaults, named in the help
@@ -125,7 +125,8 @@ class TrainSettings(BaseModel):
     races: int | None = Field(
         None,
         description=f"Parallel races (default: {SLOTS_PER_WORKER} learner cars per worker, "
-        "or in-process: 4 one-car races, 2 with two learner cars).",
+        f"or in-process: {SLOTS_PER_WORKER} one-car races, {SLOTS_PER_WORKER // 2} with two "
+        "learner cars).",
     )
     iterations: int | None = Field(None, description="Iteration budget.")
     minutes: float | None = Field(None, description="Wall-clock budget in minutes.")
