@@ -286,9 +286,7 @@ class RacingEnv(ParallelEnv):
         return observations, infos
 
     def _build_world(self) -> None:
-        if self._client is not None:
-            world.close(self._client)
-        self._client = client = world.create_world(self._physics)
+        self._client = client = world.create_world(self._physics, self._client)
         arc0 = start_arc(self.config, self.track, self._episode)
         self._obstacles = []
         if self.config.obstacles is not None:

@@ -18,6 +18,12 @@ Settings
   with default filters, never wheels; ray tests see them.
 * Determinism: deterministic overlapping pairs, a fixed time step and no real-time
   simulation, so the same calls in a fresh client give bit-identical states.
+* Reuse: an env builds each episode's world in the client of the one before, emptied by
+  PyBullet's ``resetSimulation`` (which deletes and recreates its dynamics world, body
+  ids from 0 again), so its states are bit-identical to a fresh client's. A new
+  connection costs about 25 ms, the time of 30-100 control steps: an episode a car ends
+  by leaving the road early in training paid it at every reset (benchmarks/RESULTS.md,
+  "Worlds reused across resets").
 """
 
 from __future__ import annotations
@@ -51,9 +57,16 @@ def substeps(settings: PhysicsSettings) -> int:
     return max(1, round(settings.physics_hz / settings.control_hz))
 
 
-def create_world(settings: PhysicsSettings = PhysicsSettings()) -> int:
-    """Connect a DIRECT client with gravity, the ground plane and fixed steps; return its id."""
-    client = p.connect(p.DIRECT)
+def create_world(settings: PhysicsSettings = PhysicsSettings(), client: int | None = None) -> int:
+    """A world with gravity, the ground plane and fixed steps; return its client id.
+
+    Connects a DIRECT client, or empties ``client`` (every body and setting gone) and
+    builds the world there.
+    """
+    if client is None:
+        client = p.connect(p.DIRECT)
+    else:
+        p.resetSimulation(physicsClientId=client)
     p.setGravity(0.0, 0.0, -GRAVITY, physicsClientId=client)
     p.setPhysicsEngineParameter(
         fixedTimeStep=1.0 / (settings.control_hz * substeps(settings)),

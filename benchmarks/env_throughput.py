@@ -7,7 +7,9 @@ row is the raw PyBullet cost of the same substeps with the same cars (no sensors
 or params), driving apart; each config's ratio to it shows what the rest of the step
 costs. "Physics in race" is the time the measured steps themselves spent in PyBullet's
 ``stepSimulation`` (cars that bump and respawn cost more than the floor's): the ratio
-to it is the share of the step that is ours, on the same world.
+to it is the share of the step that is ours, on the same world. "Reset ms" is the mean of
+``RESETS`` further resets of the same env (a new episode's world, cars and first
+observations), which a PettingZoo loop pays at the end of every episode.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ CONFIGS = [
     ("4 cars, camera+lidar", 4, ("camera", "lidar")),
     ("4 cars, stereo+lidar", 4, ("stereo", "lidar")),
 ]
+RESETS = 10
 
 
 class PhysicsClock:
@@ -74,6 +77,10 @@ def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str
             agent_steps += len(actions)
             if not env.agents:
                 env.reset()
+    start = time.perf_counter()
+    for _ in range(RESETS):
+        env.reset()
+    reset_s = (time.perf_counter() - start) / RESETS
     env.close()
     times = summary(latencies)
     return {
@@ -83,6 +90,7 @@ def measure_env(num_cars: int, sensors: tuple[str, ...], steps: int) -> dict[str
         "step_ms": 1e3 * times.mean,
         "physics_ms": 1e3 * physics.seconds / steps,
         "mem_mb": peak / 2**20,
+        "reset_ms": 1e3 * reset_s,
     }
 
 
@@ -103,6 +111,7 @@ def main() -> None:
         "x physics floor",
         "physics ms (in race)",
         "x physics in race",
+        "reset ms",
         "env alloc MB",
     )
     table = ResultTable(title, columns)
@@ -117,6 +126,7 @@ def main() -> None:
             "",
             "",
             "1.0",
+            "",
             "",
             "",
             "",
@@ -137,6 +147,7 @@ def main() -> None:
             f"{m['step_ms'] / (1e3 * floors[cars]):.1f}",
             f"{m['physics_ms']:.2f}",
             f"{m['step_ms'] / m['physics_ms']:.1f}",
+            f"{m['reset_ms']:.1f}",
             f"{m['mem_mb']:.1f}",
         )
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -195,9 +195,11 @@ def test_stop_freezes_in_place(client: int) -> None:
     assert math.hypot(later.x - held.x, later.y - held.y) < 5e-3
 
 
-def run_scripted(seed: int) -> list[CarState]:
+def run_scripted(seed: int, client: int | None = None) -> list[CarState]:
+    """Two cars on random commands that meet, one teleported: their states each step. In a
+    fresh client (closed after), or in ``client`` emptied and rebuilt (left open)."""
     rng = np.random.default_rng(seed)
-    cid = create_world(SETTINGS)
+    cid = create_world(SETTINGS, client)
     cars = [Car(cid, x=-1.0, y=0.0), Car(cid, x=1.0, y=0.05, yaw=math.pi)]
     states = []
     for t in range(45):
@@ -207,9 +209,20 @@ def run_scripted(seed: int) -> list[CarState]:
             cars[0].teleport(0.0, 1.0, 0.5)
         step(cid, SETTINGS)
         states.extend(car.state() for car in cars)
-    close(cid)
+    if client is None:
+        close(cid)
     return states
 
 
 def test_same_commands_give_bit_identical_states() -> None:
     assert run_scripted(7) == run_scripted(7)
+
+
+def test_a_used_client_rebuilt_gives_the_states_of_a_fresh_one() -> None:
+    cid = create_world(SETTINGS)
+    try:
+        history = run_scripted(3, cid)  # a crash and a teleport for the client to forget
+        again = run_scripted(7, cid)
+    finally:
+        close(cid)
+    assert again == run_scripted(7) != history

@@ -9,6 +9,7 @@ import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 import arena
+from arena import world
 from arena.config import NO_VARIATION, resolve_track
 from arena.drivers import LaneFollowerPolicy
 from arena.env import RacingEnv
@@ -244,6 +245,42 @@ def test_race_is_bit_identical_in_a_fresh_process() -> None:
         for _ in range(2)
     ]
     assert fresh[0] == fresh[1] == bot_race_hash()
+
+
+def _episodes_of_random_driving(race_type: str, episodes: int) -> list[tuple]:
+    """Each step's observations (bytes) and rewards over ``episodes`` seeded resets of a
+    race on random actions that meets bots or boxes (the episodes end off the road)."""
+    env = arena.parallel_env(
+        race_type=race_type, mode="training", sensors=("camera", "lidar"), seed=5
+    )
+    rng = np.random.default_rng(0)
+    trace = []
+    for _ in range(episodes):
+        obs, _ = env.reset()
+        for _ in range(60):
+            actions = {a: int(rng.integers(env.action_space(a).n)) for a in env.agents}
+            obs, rewards, *_ = env.step(actions)
+            trace.append(([o.tobytes() for ob in obs.values() for o in ob.values()], rewards))
+            if not env.agents:
+                break
+    env.close()
+    return trace
+
+
+@pytest.mark.parametrize("race_type", ["head_to_bot", "object_avoidance"])
+def test_episodes_in_a_reused_world_repeat_those_in_fresh_worlds(
+    race_type: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    reused = _episodes_of_random_driving(race_type, 3)
+    build = world.create_world
+
+    def fresh_world(settings: world.PhysicsSettings, client: int | None = None) -> int:
+        if client is not None:
+            world.close(client)
+        return build(settings)
+
+    monkeypatch.setattr(world, "create_world", fresh_world)
+    assert reused == _episodes_of_random_driving(race_type, 3)
 
 
 def test_training_restart_car_starts_a_new_episode_for_one_car() -> None:
