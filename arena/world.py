@@ -21,9 +21,9 @@ Settings
 * Reuse: an env builds each episode's world in the client of the one before, emptied by
   PyBullet's ``resetSimulation`` (which deletes and recreates its dynamics world, body
   ids from 0 again), so its states are bit-identical to a fresh client's. A new
-  connection costs about 25 ms, the time of 30-100 control steps: an episode a car ends
-  by leaving the road early in training paid it at every reset (benchmarks/RESULTS.md,
-  "Worlds reused across resets").
+  connection costs about 25 ms, the time of 30-100 control steps, which a loop that
+  resets after every short episode paid each time (benchmarks/RESULTS.md, "Worlds reused
+  across resets").
 """
 
 from __future__ import annotations
