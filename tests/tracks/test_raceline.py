@@ -175,7 +175,7 @@ def test_profile_obeys_any_limits(a_lat, accel, brake, top):
     line = profile_path(get_track("beginner_loop").waypoints, limits)
     assert line.speed.max() <= top + 1e-9
     assert np.all(line.speed**2 * np.abs(line.curvature) <= a_lat * (1 + 1e-9))
-    assert line.lap_time >= line.length / top
+    assert line.lap_time >= line.length / top * (1 - 1e-12)  # equal at top speed all round
 
 
 @settings(max_examples=30, deadline=None)
