@@ -52,7 +52,7 @@ def privileged_state(track: Track, params: dict[str, Any]) -> np.ndarray:
     """
     half = max(0.5 * float(params["track_width"]), 1e-6)
     arc = float(params["projection_distance"])
-    _, headings = track.pose_at(track.wrap_arc_length(arc + np.asarray(LOOKAHEAD_M)))
+    headings = track.heading_at(arc + np.asarray(LOOKAHEAD_M))
     relative = headings - math.radians(float(params["heading"]))
     speed = float(params["speed"])
     car = [

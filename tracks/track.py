@@ -93,11 +93,18 @@ class Track:
     is_loop: bool
     description: str = ""
     _cum: np.ndarray = field(init=False, repr=False)
+    _tangents: np.ndarray = field(init=False, repr=False)  # unit, one per segment
+    _headings: np.ndarray = field(init=False, repr=False)  # radians, one per segment
 
     def __post_init__(self) -> None:
         for attr in ("waypoints", "left", "right"):
             object.__setattr__(self, attr, _frozen(getattr(self, attr)))
         object.__setattr__(self, "_cum", _frozen(cumulative_length(self.waypoints)))
+        tangents = np.diff(self.waypoints, axis=0)
+        tangents /= np.linalg.norm(tangents, axis=-1, keepdims=True)
+        object.__setattr__(self, "_tangents", _frozen(tangents))
+        headings = np.arctan2(tangents[:, 1], tangents[:, 0])
+        object.__setattr__(self, "_headings", _frozen(headings))
 
     # ----------------------------------------------------------------- building
     @classmethod
@@ -324,12 +331,15 @@ class Track:
         s_arr = np.asarray(s, dtype=float)
         seg, f = self._locate(s_arr)
         a, b = self.waypoints[seg], self.waypoints[seg + 1]
-        tangent = b - a
-        tangent /= np.linalg.norm(tangent, axis=-1, keepdims=True)
+        tangent = self._tangents[seg]
         normal = np.stack([-tangent[..., 1], tangent[..., 0]], axis=-1)
         pos = a + f[..., None] * (b - a) + self.lane_offset(s_arr, lane)[..., None] * normal
-        heading = np.arctan2(tangent[..., 1], tangent[..., 0])
-        return pos, heading
+        return pos, self._headings[seg]
+
+    def heading_at(self, s: np.ndarray | float) -> np.ndarray:
+        """Heading (radians) at arc length ``s``: :meth:`pose_at`'s, without the position."""
+        seg, _ = self._locate(np.asarray(s, dtype=float))
+        return self._headings[seg]
 
     def reversed(self) -> Track:
         """The same road driven the other way; a loop keeps its start line and its name."""

@@ -63,6 +63,19 @@ def test_lateral_offset_sign_matches_side(frac: float, offset: float) -> None:
     assert bool(TRACK.contains(point)[0])
 
 
+@settings(max_examples=200, deadline=None)
+@given(fractions, st.integers(min_value=-2, max_value=2))
+def test_heading_at_points_along_the_road_as_pose_at_does(frac: float, laps: int) -> None:
+    for track in (TRACK, REVERSED):
+        s = (frac + laps) * track.length
+        heading = track.heading_at(s)
+        assert heading == track.pose_at(s)[1]  # the same number, without the position
+        ahead = track.pose_at(s + 1e-4)[0] - track.pose_at(s)[0]
+        assert np.cos(heading - np.arctan2(ahead[1], ahead[0])) > 0.99
+    arcs = np.linspace(-1.0, 2.5 * TRACK.length, 40)
+    np.testing.assert_array_equal(TRACK.heading_at(arcs), TRACK.pose_at(arcs)[1])
+
+
 def test_points_beyond_the_borders_are_off_the_road() -> None:
     s = np.linspace(0, TRACK.length, 50, endpoint=False)
     pos, heading = TRACK.pose_at(s)
