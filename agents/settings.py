@@ -29,7 +29,15 @@ from arena.config import RACE_TYPES, BotConfig, ObstacleConfig, RaceType
 from tracks.catalog import Direction
 
 # Fields a ``--resume`` takes from the command line; every other one comes from the run.
-RESUME_OVERRIDES = ("iterations", "minutes", "workers", "device", "threads", "sync")
+RESUME_OVERRIDES = (
+    "iterations",
+    "minutes",
+    "workers",
+    "device",
+    "threads",
+    "sync",
+    "background_eval",
+)
 # Learner cars per worker process (or in-process) when ``races`` is not given. Each step of
 # a worker carries fixed costs (the pipe, waking it, the learner's forward pass and
 # bookkeeping per call) that its cars share; at DeepRacer's default iteration (1,280
@@ -170,6 +178,12 @@ class TrainSettings(BaseModel):
         description="Collect, then update, in turn (--sync), or update while the next "
         "rollout is collected, one update behind (--no-sync). Default: overlapped on a "
         "GPU, in turn on a CPU.",
+    )
+    background_eval: bool = Field(
+        False,
+        description="Race each evaluation in a process of its own while the next "
+        "iterations train (for a machine with a core the trainer and its env workers "
+        "leave free; on 2 cores it gained nothing).",
     )
     grow_batch: bool | None = Field(
         None,

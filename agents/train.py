@@ -12,7 +12,7 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from copy import deepcopy
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -21,19 +21,50 @@ import torch
 import arena
 from agents import evaluate, export, networks, plots
 from agents.anchor import anchored_config
+from agents.background_eval import BackgroundEvaluator
 from agents.checkpoint import checkpoint, checkpoint_path, read_checkpoint, write_checkpoint
 from agents.deepracer_metrics import TrainingMetricsLog
 from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.imitation import imitation_config
 from agents.metrics import IterationStats, append_metrics
+from agents.processes import STOP_SIGNALS
 from agents.run import Run, holds_run
 from agents.runner import RacingRunner
 from agents.selfplay import OpponentPool, pursuit_lap_s
 from agents.settings import TrainSettings
 from agents.vecenv import RacingVecEnv
+from arena.race import RaceResult
 from arena.simtrace import write_simtrace
 from tracks.catalog import get_track
+
+
+@dataclass(frozen=True)
+class _Evaluated:
+    """An iteration's stats before its evaluation, and, if one is due, its checkpoint."""
+
+    stats: IterationStats
+    content: dict[str, Any] | None = None
+
+
+@dataclass
+class _LoopState:
+    """Where the training loop stands: the last finished iteration (outputs written), the
+    one in ``last.pt``, the last begun (its update maybe applied, in part if interrupted),
+    and the state after the finished one while the weights may have moved past it."""
+
+    finished: int
+    finished_at: float
+    saved: int = field(init=False)
+    latest: int = field(init=False)
+    fallback: dict[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        self.saved = self.latest = self.finished
+
+    def finish(self, iteration: int, elapsed_s: float, content: dict[str, Any] | None) -> None:
+        """Iteration ``iteration`` is finished (``content``: its checkpoint, if taken)."""
+        self.finished, self.finished_at, self.fallback = iteration, elapsed_s, content
 
 
 @dataclass
@@ -63,8 +94,6 @@ def _rank() -> int:
 CLONE_CRITIC_WARMUP = 5
 # In a pool self-play run's folder: each opponent's games, win rate, draw chance and pace.
 POOL_FILE = "selfplay_pool.json"
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-"""What stops training: Ctrl-C, ``kill`` / systemd / a container stop, a closed terminal."""
 
 
 @contextmanager
@@ -316,8 +345,10 @@ class Trainer:
     ) -> None:
         """Iterate; checkpoint at each evaluation and at the end.
 
-        An iteration is finished once its outputs are written. On Ctrl-C the checkpoint
-        holds the last finished iteration, never a half-applied update.
+        An iteration is finished once its outputs are written. With ``--background-eval``
+        an evaluation races in a process of its own while the next iteration trains, and
+        the evaluated iteration is finished after that next one's update. On Ctrl-C the
+        checkpoint holds the last finished iteration, never a half-applied update.
         """
         runner.start()
         started = time.monotonic() - self.elapsed_before
@@ -325,33 +356,62 @@ class Trainer:
         def elapsed() -> float:
             return time.monotonic() - started
 
-        finished, finished_at = self.start_iteration - 1, self.elapsed_before
-        saved = finished  # the iteration in checkpoints/last.pt
-        before: dict[str, Any] | None = None  # while an iteration runs: the state it started from
+        loop = _LoopState(self.start_iteration - 1, self.elapsed_before)
+        background = self.settings.background_eval and self.writes_run_folder
+        evaluator: BackgroundEvaluator | None = None  # started at the first evaluation
+        pending: _Evaluated | None = None  # an iteration whose evaluation races elsewhere
+
+        def finish(done: _Evaluated, evaluation: EvalSummary | None) -> None:
+            stats = self._conclude(done, evaluation, pool)
+            with _sigint_deferred():  # the iteration's outputs are written whole
+                self._write_outputs(stats)
+                if stats.eval is not None and done.content is not None:
+                    self._save(done.content)
+                    self._save_if_best(done.content, stats.eval)
+                    loop.saved = stats.iteration
+                loop.finish(stats.iteration, stats.elapsed_s, done.content)
+            self._record(result, stats)
+            if on_iteration is not None:
+                on_iteration(stats)
+
         try:
-            while not self._budget_spent(finished + 1, elapsed()):
-                it = finished + 1
+            while not self._budget_spent(loop.latest + 1, elapsed()):
+                it = loop.latest + 1
                 self._draw_opponents(env, pool)
-                before = self._checkpoint(runner, finished, finished_at, copy=True)
+                if loop.latest == loop.finished:
+                    state = self._checkpoint(runner, loop.finished, loop.finished_at, copy=True)
+                    loop.fallback = state
+                loop.latest = it
                 losses = runner.iteration(it)
                 stats = self._finish_iteration(runner, env, pool, it, elapsed(), losses)
-                with _sigint_deferred():  # the iteration's outputs are written whole
-                    self._write_outputs(stats)
-                    if stats.eval is not None:
-                        content = self._checkpoint(runner, it, stats.elapsed_s)
-                        self._save(content)
-                        self._save_if_best(content, stats.eval)
-                        saved = it
-                    finished, finished_at, before = it, stats.elapsed_s, None
-                self._record(result, stats)
-                if on_iteration is not None:
-                    on_iteration(stats)
+                if pending is not None and evaluator is not None:
+                    finish(pending, self._summarize(evaluator.result()))
+                    pending = None
+                if not self._evaluation_due(it, stats.elapsed_s):
+                    finish(_Evaluated(stats), None)
+                elif not background:
+                    evaluation = self._evaluate(runner)
+                    content = self._checkpoint(runner, it, stats.elapsed_s)
+                    finish(_Evaluated(stats, content), evaluation)
+                else:
+                    content = self._checkpoint(runner, it, stats.elapsed_s, copy=True)
+                    evaluator = evaluator or BackgroundEvaluator(self.target)
+                    evaluator.submit(runner.alg.get_policy())
+                    pending = _Evaluated(stats, content)
                 if self.settings.stop_on_clean_eval and result.first_clean_eval_s is not None:
                     break
+            if pending is not None and evaluator is not None:
+                finish(pending, self._summarize(evaluator.result()))
         except KeyboardInterrupt:
             result.interrupted = True
-        if saved != finished:  # mid-iteration: the state it started from, else the current one
-            self._save(before or self._checkpoint(runner, finished, finished_at))
+        finally:
+            if evaluator is not None:
+                evaluator.close()
+        if loop.saved != loop.finished:  # the state after the last finished iteration
+            if loop.latest == loop.finished:
+                self._save(self._checkpoint(runner, loop.finished, loop.finished_at))
+            elif loop.fallback is not None:
+                self._save(loop.fallback)
 
     def _budget_spent(self, it: int, elapsed: float) -> bool:
         s = self.settings
@@ -380,7 +440,8 @@ class Trainer:
         elapsed: float,
         losses: dict[str, float],
     ) -> IterationStats:
-        """After an update: the pool learns the results, simtrace, evaluation; the stats."""
+        """After an update: the pool learns the results, simtrace; the stats (no evaluation
+        yet: :meth:`_conclude` adds it)."""
         episodes = env.pop_episodes()
         simtrace = env.drain_simtrace()
         if pool is not None:
@@ -388,10 +449,18 @@ class Trainer:
         if self.writes_run_folder:
             self._write_training_simtrace(it, simtrace)
             self.dr_metrics.add_training(episodes)
-        evaluation = self._evaluate(runner) if self._evaluation_due(it, elapsed) else None
-        if pool is not None and evaluation is not None:
+        return IterationStats.of_iteration(it, elapsed, len(simtrace), episodes, losses, None)
+
+    def _conclude(
+        self, done: _Evaluated, evaluation: EvalSummary | None, pool: OpponentPool | None
+    ) -> IterationStats:
+        """An iteration's stats with its ``evaluation``, if it had one, which paces the
+        pool's paced racers."""
+        if evaluation is None:
+            return done.stats
+        if pool is not None:
             self._pace_pool(pool, evaluation)
-        return IterationStats.of_iteration(it, elapsed, len(simtrace), episodes, losses, evaluation)
+        return replace(done.stats, eval=evaluation)
 
     def _write_outputs(self, stats: IterationStats) -> None:
         """``TrainingMetrics.json``, then the iteration's ``metrics.csv`` row and graph."""
@@ -444,8 +513,8 @@ class Trainer:
         return self.writes_run_folder and (every or self._last_iteration(it, elapsed))
 
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
-        """Race the greedy policy (race mode; head to model: against the run's first
-        ``--opponent``) and write the evaluation simtrace."""
+        """Race the greedy policy in this process (race mode; head to model: against the
+        run's first ``--opponent``); write the evaluation simtrace."""
         policy = evaluate.TorchPolicy(runner.alg.get_policy(), self.settings.discrete)
         race = evaluate.evaluate_policy(
             self.target.evaluation_config(),
@@ -454,6 +523,10 @@ class Trainer:
             opponent=self.eval_opponent,
         )
         runner.alg.train_mode()
+        return self._summarize(race)
+
+    def _summarize(self, race: RaceResult) -> EvalSummary:
+        """Write an evaluation's simtrace and laps; its headline numbers."""
         evaluate.write_evaluation(self.run_dir, race, training_log=self.dr_metrics)
         return evaluate.summary(race)
 

@@ -10,10 +10,7 @@ sample name: functions never cross process boundaries.
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
-import signal
-import threading
 import time
 import traceback
 from collections import Counter
@@ -29,6 +26,7 @@ from tensordict import TensorDict
 from agents.imitation import EXPERT_GROUP, ExpertDriver
 from agents.networks import observation_groups
 from agents.privileged import PRIVILEGED_GROUP, privileged_state
+from agents.processes import ignore_stop_signals, spawn_helper
 from agents.rewards import resolve_reward
 from agents.selfplay import Opponent, opponent_driver
 from agents.settings import SLOTS_PER_WORKER
@@ -318,14 +316,8 @@ class EnvGroup:
             env.close()
 
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-"""Signals the trainer handles (as Ctrl-C) and workers ignore: the trainer closes them,
-and a worker whose trainer is gone exits when its pipe closes."""
-
-
 def _worker(conn: Any, kwargs: dict[str, Any]) -> None:
-    for sig in STOP_SIGNALS:  # the trainer handles them and closes this worker
-        signal.signal(sig, signal.SIG_IGN)
+    ignore_stop_signals()  # the trainer handles them and closes this worker
     try:
         group = EnvGroup(**kwargs)
         conn.send(("ok", None))
@@ -439,23 +431,12 @@ class RacingVecEnv(VecEnv):
 
     # ---------------------------------------------------------------- workers
     def _start_workers(self, kwargs: list[dict[str, Any]]) -> None:
-        """Spawn the workers with the stop signals ignored (inherited through exec, so a
-        Ctrl-C, SIGTERM or SIGHUP to the process group while they import cannot kill them);
-        the trainer handles those signals and closes them."""
-        ctx = mp.get_context("spawn")
-        main = threading.current_thread() is threading.main_thread()
-        previous = {s: signal.signal(s, signal.SIG_IGN) for s in STOP_SIGNALS} if main else None
-        try:
-            for kw in kwargs:
-                parent, child = ctx.Pipe()
-                proc = ctx.Process(target=_worker, args=(child, kw), daemon=True)
-                proc.start()
-                child.close()
-                self._conns.append(parent)
-                self._procs.append(proc)
-        finally:
-            for sig, handler in (previous or {}).items():
-                signal.signal(sig, handler)
+        """Spawn the workers (:func:`agents.processes.spawn_helper`: the stop signals are
+        the trainer's, which closes them)."""
+        for kw in kwargs:
+            conn, proc = spawn_helper(_worker, kw)
+            self._conns.append(conn)
+            self._procs.append(proc)
         for conn in self._conns:
             self._receive(conn)
 

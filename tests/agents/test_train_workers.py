@@ -142,6 +142,41 @@ def test_training_with_workers_writes_the_in_process_simtrace(tmp_path):
     assert local == spawned
 
 
+def _evaluations(run: Path) -> tuple[list[dict], list[list[dict]]]:
+    """The run's evaluation columns of ``metrics.csv``, and each evaluation's simtrace."""
+    with (run / "metrics.csv").open() as handle:
+        columns = [{k: v for k, v in r.items() if "eval" in k} for r in csv.DictReader(handle)]
+    traces = []
+    for path in sorted(run.glob("evaluation-*/evaluation-simtrace/0-iteration.csv")):
+        with path.open() as handle:
+            traces.append(_without_wall_clock(list(csv.DictReader(handle))))
+    return columns, traces
+
+
+@pytest.mark.slow
+def test_evaluations_in_a_process_of_their_own_race_each_iteration_s_weights(tmp_path):
+    """--background-eval: an evaluation races in a process of its own while the next
+    iteration trains; it races the weights of the iteration it belongs to, as an evaluation
+    in the trainer's process does, and its process ends with the run."""
+    before = _workers(os.getpid())
+    space = parse_action_space_spec("continuous:-30:30:0.5:2")  # any change of weights shows
+    settings = {"action_space": space, "iterations": 3, "eval_every": 1, "eval_time_limit": 8.0}
+    for background in (False, True):
+        run = tmp_path / str(background)
+        Trainer(_settings(workers=2, background_eval=background, **settings), run, TINY).run()
+    (local, local_traces) = _evaluations(tmp_path / "False")
+    background = _evaluations(tmp_path / "True")
+    assert all(row["eval_progress"] for row in local) and len(local) == 3
+    assert len({str(trace) for trace in local_traces}) == 3  # each iteration drives its own way
+    assert (local, local_traces) == background
+    for name in ("best", "last"):
+        a, b = (torch.load(tmp_path / w / "checkpoints" / f"{name}.pt") for w in ("False", "True"))
+        assert a["iteration"] == b["iteration"]
+        for key, value in a["actor_state_dict"].items():
+            assert torch.equal(value, b["actor_state_dict"][key]), (name, key)
+    assert not _wait_gone(_workers(os.getpid()) - before, seconds=5.0)
+
+
 # -------------------------------------------- 2. a reward failing in a worker
 def test_a_reward_raising_in_a_worker_stops_the_cli_with_its_message(tmp_path):
     reward = tmp_path / "reward.py"
@@ -169,7 +204,8 @@ def test_ctrl_c_with_workers_saves_packs_and_stops_every_worker(tmp_path):
     hp.write_text(TINY.model_dump_json())
     command = [sys.executable, "-m", "slipstream", "train", "--out", str(run), "--minutes", "5"]
     command += ["--sensors", "lidar", "--action-space", "3x3@1.0", "--workers", "2"]
-    command += ["--eval-every", "1000", "--hyperparameters", str(hp)]
+    command += ["--eval-every", "1", "--eval-time-limit", "60", "--background-eval"]
+    command += ["--hyperparameters", str(hp)]
     env = {**os.environ, "COLUMNS": "200", "PYTHONFAULTHANDLER": "1"}
     # A session of its own: the process group a terminal's Ctrl-C signals. SIGINT as a
     # terminal leaves it: a shell's background job (`make test &`) ignores SIGINT, and an
@@ -186,7 +222,7 @@ def test_ctrl_c_with_workers_saves_packs_and_stops_every_worker(tmp_path):
             assert proc.poll() is None and time.monotonic() < deadline, proc.stdout.read()
             time.sleep(0.1)
         workers = _workers(proc.pid)
-        assert len(workers) == 2
+        assert len(workers) == 3  # two env workers and the evaluations' process
         os.killpg(proc.pid, signal.SIGINT)
         try:
             output, _ = proc.communicate(timeout=120)
