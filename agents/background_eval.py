@@ -58,11 +58,6 @@ class BackgroundEvaluator:
         self._conn, self._proc = spawn_helper(_serve, replace(run))
         self._busy = False
 
-    @property
-    def busy(self) -> bool:
-        """Whether a race was submitted and its result not yet taken."""
-        return self._busy
-
     def submit(self, actor: torch.nn.Module) -> None:
         """Start racing ``actor``'s weights (one race at a time: take the last result first)."""
         if self._busy:
@@ -74,11 +69,11 @@ class BackgroundEvaluator:
         """The submitted race's result, once it has run."""
         if not self._busy:
             raise RuntimeError("no evaluation was submitted")
-        self._busy = False
         try:
-            status, payload = self._conn.recv()
+            status, payload = self._conn.recv()  # Ctrl-C here leaves it busy: close stops it
         except EOFError:
             raise RuntimeError("the evaluation process exited unexpectedly") from None
+        self._busy = False
         if status == "error":
             raise RuntimeError(f"evaluation failed: {payload}")
         return payload
