@@ -43,6 +43,11 @@ _CNN_LAYERS: dict[str, tuple[list[int], list[int], list[int]]] = {
     "CPU CNN": ([16, 32, 32], [5, 3, 3], [2, 2, 1]),
 }
 POOLED_CNN = "agents.networks:PooledCNNModel"
+# How the policy's images are laid out in memory: row by row (NCHW). An H x W x C image
+# permuted to C x H x W has channels-last strides, and with one or two channels PyTorch's
+# channels-last pooling made the policy's forward pass about twice as slow
+# (benchmarks/RESULTS.md, "Images laid out row by row").
+IMAGE_LAYOUT = torch.contiguous_format
 # The critic of ``--critic privileged``: an MLP on the privileged state, inputs normalised
 # by running statistics (its features have different scales).
 PRIVILEGED_CRITIC: dict[str, Any] = {
@@ -179,12 +184,14 @@ def example_observations(
 def observation_groups(
     arrays: dict[str, np.ndarray], device: str | torch.device = "cpu"
 ) -> TensorDict:
-    """Batched raw sensor arrays as the policy's groups (images ``C x H x W`` in ``[0, 1]``)."""
+    """Batched raw sensor arrays as the policy's groups (images ``C x H x W`` in ``[0, 1]``,
+    laid out row by row: see :data:`IMAGE_LAYOUT`)."""
     groups = {}
     for name, value in arrays.items():
         data = torch.from_numpy(np.ascontiguousarray(value))
         if name in IMAGE_SENSORS:
-            data = data.permute(0, 3, 1, 2).float().div(255.0)
+            data = data.permute(0, 3, 1, 2).to(torch.float32, memory_format=IMAGE_LAYOUT)
+            data = data.div(255.0)
         groups[name] = data.float().to(device)
     batch = next(iter(groups.values())).shape[0]
     return TensorDict(groups, batch_size=[batch], device=device)

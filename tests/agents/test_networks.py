@@ -173,3 +173,15 @@ def test_images_another_network_reads_unpooled_stay_unpooled():
     with networks.images_pooled_once([pooled_cnn, plain_cnn], rollout):
         assert rollout["camera"].shape == (3, 4, 1, 120, 160)
         assert isinstance(pooled_cnn.cnns["camera"][0], torch.nn.AvgPool2d)
+
+
+@pytest.mark.parametrize("frames", [1, 3])
+def test_images_reach_the_policy_row_by_row_with_the_camera_s_values(frames):
+    """C x H x W images in [0, 1] with NCHW strides (one-channel channels-last pooling
+    halved the forward pass's speed), the same numbers as the camera's pixels / 255."""
+    pixels = np.random.default_rng(0).integers(0, 256, (4, 120, 160, frames), dtype=np.uint8)
+    images = networks.observation_groups({"camera": pixels})["camera"]
+    assert images.shape == (4, frames, 120, 160) and images.dtype == torch.float32
+    assert images.stride() == torch.empty(images.shape).stride()
+    expected = torch.from_numpy(pixels).permute(0, 3, 1, 2).float() / 255.0
+    assert torch.equal(images, expected)
