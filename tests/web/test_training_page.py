@@ -161,7 +161,13 @@ def test_a_checkpoint_other_than_the_best_becomes_the_model_evaluated_and_submit
     assert page.is_checked("#checkpoint-fastest")
 
     # Evaluated, the chosen model races its job's race type with the job's own bots.
-    page.wait_for_selector("#evaluate-track option[value='slipstream_speedway']", state="attached")
+    page.wait_for_selector(
+        "#evaluate-track option[value='slipstream_speedway'], #evaluate-result.error",
+        state="attached",
+    )
+    assert page.query_selector("#evaluate-result.error") is None, page.inner_text(
+        "#evaluate-result"
+    )
     page.click("#evaluate")
     page.wait_for_selector("#evaluate-result.ok, #evaluate-result.error")
     assert "Queued" in page.inner_text("#evaluate-result"), page.inner_text("#evaluate-result")
@@ -187,3 +193,39 @@ def test_checkpoints_of_one_iteration_show_their_shared_model_chosen_once(
         link = page.get_attribute(f"#checkpoints tr[data-checkpoint={name}] a", "href")
         assert link == f"/models/{best['id']}"
     assert page.is_checked("#checkpoint-best") and not page.is_checked("#checkpoint-fastest")
+
+
+def test_the_track_and_event_lists_load_after_a_failed_fetch_and_say_when_they_cannot(
+    page, league: League, tmp_path: Path
+) -> None:
+    """One dropped connection or busy answer is tried again; a server that never answers the
+    catalogue leaves a message, not an empty list that cannot be evaluated."""
+    archives = {c.name: make_model_zip(tmp_path, 60 + i).read_bytes() for i, c in enumerate(KEPT)}
+    job_id, _ = _job_with_run(league, archives)
+    sign_in(page, league, "alice")
+    failed: list[str] = []
+
+    def first_fails(route) -> None:
+        if route.request.url in failed:
+            route.continue_()
+        else:
+            failed.append(route.request.url)
+            route.abort() if "catalogue" in route.request.url else route.fulfill(status=503)
+
+    page.route("**/api/garage/catalogue", first_fails)
+    page.route("**/api/events", first_fails)
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#evaluate-track option[value='slipstream_speedway']", state="attached")
+    assert page.input_value("#evaluate-track") == "slipstream_speedway"
+    page.wait_for_selector("#submit-event option", state="attached")
+    assert "not loaded" not in page.inner_text("#submit-event")
+    assert len(failed) == 2
+    assert page.query_selector("#evaluate-result.error, #submit-result.error") is None
+
+    page.unroute("**/api/garage/catalogue")
+    page.route("**/api/garage/catalogue", lambda route: route.abort())
+    page.goto(f"/garage/jobs/{job_id}")
+    page.wait_for_selector("#evaluate-result.error", timeout=20_000)
+    assert "track list did not load" in page.inner_text("#evaluate-result")
+    assert "did not answer" in page.inner_text("#evaluate-result")
+    assert page.eval_on_selector_all("#evaluate-track option", "os => os.length") == 0

@@ -23,6 +23,23 @@ const Slip = {
     return { ok: response.ok, status: response.status, body };
   },
 
+  // GET `path`, trying again after a network error, a 429 or a 5xx (1, 2, 4 s apart); the
+  // last answer, or { ok: false, status: 0 } when the server never answered.
+  async getPatiently(path, tries = 4) {
+    let answer = { ok: false, status: 0, body: null };
+    for (let attempt = 0; attempt < tries; attempt++) {
+      if (attempt) await new Promise((resolve) => window.setTimeout(resolve, 1000 * 2 ** (attempt - 1)));
+      try {
+        answer = await Slip.api(path);
+      } catch (err) {
+        answer = { ok: false, status: 0, body: null };
+        continue;
+      }
+      if (answer.ok || (answer.status !== 429 && answer.status < 500)) return answer;
+    }
+    return answer;
+  },
+
   // Build an element: el("td", {class: "x"}, "text", child, ...); text is never parsed as HTML.
   el(tag, attrs, ...children) {
     const node = document.createElement(tag);
@@ -71,7 +88,8 @@ const Slip = {
   errorText(answer) {
     const detail = answer.body && answer.body.detail;
     if (Array.isArray(detail)) return detail.map((d) => `${(d.loc || []).slice(1).join(".")}: ${d.msg}`).join("; ");
-    return detail || `The request failed (HTTP ${answer.status}).`;
+    if (detail) return detail;
+    return answer.status ? `The request failed (HTTP ${answer.status}).` : "The server did not answer.";
   },
 
   // The line an error message names ("... at line 3"), or null.

@@ -241,17 +241,20 @@ async function showModelActions(job) {
   section.hidden = false;
   showModel(job.model_id, "the job's model: its best evaluation's weights");
   loadCheckpoints();
-  const [catalogue, events] = await Promise.all([Slip.api("/api/garage/catalogue"), Slip.api("/api/events")]);
+  const [catalogue, events] = await Promise.all([Slip.getPatiently("/api/garage/catalogue"), Slip.getPatiently("/api/events")]);
   if (catalogue.ok) {
     byId("evaluate-track").replaceChildren(
       ...catalogue.body.tracks.map((t) => Slip.el("option", { value: t.name, selected: t.name === job.track }, t.display_name)),
     );
+  } else {
+    Slip.say("evaluate-result", `The track list did not load: ${Slip.errorText(catalogue)} Reload the page to try again.`, "error");
   }
+  if (!events.ok) Slip.say("submit-result", `The open events did not load: ${Slip.errorText(events)} Reload the page to try again.`, "error");
   const open = events.ok ? events.body.filter((e) => e.status === "open" && e.race_type === job.race_type) : [];
   byId("submit-event").replaceChildren(
     ...(open.length
       ? open.map((e) => Slip.el("option", { value: e.id }, `${e.name} (${e.track})`))
-      : [Slip.el("option", { value: "" }, `no open ${job.race_type.replace(/_/g, " ")} event`)]),
+      : [Slip.el("option", { value: "" }, events.ok ? `no open ${job.race_type.replace(/_/g, " ")} event` : "events not loaded")]),
   );
   byId("submit").disabled = !open.length;
   loadEvaluations();
