@@ -277,6 +277,15 @@ LINE_SHARE_QUANTILE = 0.75
 # corner's inside by about 0.1 m, and on the outside of the speedway's first corner at 60%
 # it closed to 0.2 m from the rival (centre to centre, the cars 0.196 m wide) and hit it.
 PURSUIT_CUT_M = 0.1
+# A pass along a lane is planned this far ahead (longer than PASS_PLAN_S: the lane's
+# speed gains 0.5-0.8 m/s on an 80% racer, so the 1.4 m a pass needs takes 2-3 s after
+# the swing out; planned over 3 s the teacher never passed it on grand_tour). While it
+# passes, the car aims at the lane where its pursuit point is, not beside the rival now,
+# and until the lane has room where the car is it follows on the line: where the line
+# crosses the track the rival, a metre ahead, is already across, and aiming beside it, or
+# at the lane pressed against the road's edge, steered the car into the corner's inside
+# and halved its speed (RESULTS.md, "The teacher passes the 80% racer on grand_tour").
+LANE_PASS_PLAN_S = 4.5
 # Following (a car that cannot be passed): closing to FOLLOW_GAP_M (centre to centre along
 # the track) at FOLLOW_GAIN m/s per metre of gap error, and never faster than lets the car
 # brake at its braking limit, after FOLLOW_REACTION_S (three control steps: with one, the
@@ -488,6 +497,8 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             params["x"], params["y"], params["heading"], min(params["speed"], most)
         )
         arc = float(self.track.project(rear[None]).arc_length[0]) + min(distance, self._aim_within)
+        if self._lane_aim:  # the lane it planned, where it aims (not beside the rival now)
+            offset = self._lane_offset(arc)
         target, _ = self.track.pose_at(self.track.wrap_arc_length(arc), offset)
         wheelbase = self.limits.wheelbase_at(params["speed"])
         steer = pursuit_steering(DEFAULT_CAR, rear[0], rear[1], yaw, target, wheelbase)
@@ -585,10 +596,12 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             side = self._racer_side(i, gap, here, arc, seen)
             if side is not None:
                 self._passing, self._side = i, side
+                if gap > DEFAULT_CAR.length and not self._lanes[side].fits(arc):
+                    # no room for the lane here yet: behind the rival on the line
+                    follow = self._follow_speed(gap, seen.speed, self._my_speed)
+                    return None, min(line_speed, follow)
                 self._lane_aim = True
-                wide = CAR_CLEARANCE_M + PURSUIT_CUT_M
-                aside = float(np.clip(seen.offsets[-1] + side * wide, -self._room, self._room))
-                return aside, self._lanes[side].speed(arc)
+                return self._lane_offset(arc), self._lanes[side].speed(arc)
         else:
             side = self._pass_side(seen.offsets[-1], here, gap)
             if side is not None and self._keeps_passing(i, gap, arc, seen):
@@ -659,12 +672,20 @@ class PassingPursuitPolicy(PurePursuitPolicy):
                 return side
         return None
 
+    def _lane_offset(self, arc: float) -> float:
+        """The lateral offset of the pass under way along a lane at arc length ``arc``: the
+        racing line's there, moved :data:`CAR_CLEARANCE_M` and :data:`PURSUIT_CUT_M` to the
+        pass's side, on the road."""
+        wide = self._side * (CAR_CLEARANCE_M + PURSUIT_CUT_M)
+        return float(np.clip(self._line_offset_at(arc) + wide, -self._room, self._room))
+
     def _lane_pass_completes(
         self, arc: float, gap: float, seen: _Seen, lane: _Lane, clear: float
     ) -> bool:
         """Whether this car, at arc length ``arc`` and ``gap`` metres behind a car it has
         ``seen`` racing the racing line, gets ``clear`` metres ahead of it along ``lane``
-        within :data:`PASS_PLAN_S`, the lane staying on the road while the cars overlap.
+        within :data:`LANE_PASS_PLAN_S`, the lane staying on the road while the cars
+        overlap.
 
         Played forward a control step at a time: this car at :data:`PASS_LINE_SHARE` of
         the lane's profile speed, reached at its acceleration and braking limits from its
@@ -675,7 +696,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         limits = self.line.limits
         mine, theirs = arc, arc + gap
         speed, share = self._my_speed, seen.line_share
-        for _ in range(round(PASS_PLAN_S / CONTROL_DT)):
+        for _ in range(round(LANE_PASS_PLAN_S / CONTROL_DT)):
             if mine - theirs > -DEFAULT_CAR.length and not lane.fits(theirs):
                 return False  # alongside where the lane beside the rival leaves the road
             change = PASS_LINE_SHARE * lane.speed(mine) - speed
