@@ -348,7 +348,7 @@ function build() {
 }
 
 async function start() {
-  const answer = await Slip.api("/api/garage/catalogue");
+  const answer = await Slip.getPatiently("/api/garage/catalogue");
   if (!answer.ok) {
     Slip.say("validate-result", "The garage's catalogue could not be loaded: " + Slip.errorText(answer), "error");
     return;
