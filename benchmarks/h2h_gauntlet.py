@@ -11,8 +11,9 @@ races two-car heats, ``--races`` seeded races per rival with the grid alternatin
 - each other model file of ``--field`` (default: the other sample models);
 - the scripted teacher (the passing pursuit driver, the league's bot).
 
-One table, a row per (track, rival): the model's wins from behind and from ahead,
-overtakes and at-fault collisions per race (the model's, ``arena.racing_metrics``), and
+One table, a row per (track, rival): the model's wins from behind and from ahead, the
+races started behind in which it got past the rival (at least one overtake), overtakes and
+at-fault collisions per race (the model's, ``arena.racing_metrics``), and
 the seconds a lap it lost in the races it started behind, against its solo laps (total
 time per lap minus the solo lap time; races it did not finish are left out and counted).
 
@@ -136,6 +137,7 @@ def row(results: list[RaceResult], solo: float | None, laps: int) -> list[str]:
     return [
         wins(behind),
         wins(ahead),
+        f"{sum(1 for c in behind if c.overtakes > 0)}/{len(behind)}",
         f"{mean(c.overtakes for c in mine):.2f}",
         f"{mean(c.at_fault_collisions for c in mine):.2f}",
         lost_cell,
@@ -169,12 +171,12 @@ def main() -> None:
         car = model_car(ME, model.info.model_dump(mode="json"))
     subject = "the teacher" if args.teacher else args.model.name
     others = model_heats(field)
-    columns = ["track", "rival", "wins from behind", "wins from ahead", "overtakes/race",
-               "at-fault/race", "s/lap lost behind"]  # fmt: skip
+    columns = ["track", "rival", "wins from behind", "wins from ahead", "passed from behind",
+               "overtakes/race", "at-fault/race", "s/lap lost behind"]  # fmt: skip
     table = ResultTable(
         f"Gauntlet of {subject}: {args.races} races per rival, {args.laps} laps",
         columns,
-        "ll" + "r" * 5,
+        "ll" + "r" * 6,
     )
     with Progress() as progress:
         for track in args.tracks.split(","):
