@@ -119,6 +119,13 @@ class TrainSettings(BaseModel):
         description="Iterations over which the anchor's weight decays linearly to 0 "
         "(default: it holds).",
     )
+    min_std: float | None = Field(
+        None,
+        gt=0.0,
+        description="The lowest standard deviation of a continuous policy's action noise "
+        "(rsl-rl's std_range): PPO after imitation otherwise shrinks it until it stops "
+        "exploring. Default: no floor.",
+    )
     critic_warmup: int | None = Field(
         None,
         ge=0,

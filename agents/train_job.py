@@ -53,6 +53,7 @@ JOB_OPTIONS = (
     "anchor",
     "anchor_weight",
     "anchor_iterations",
+    "min_std",
     "critic_warmup",
     "seed",
     "eval_every",

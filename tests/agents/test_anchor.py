@@ -109,3 +109,30 @@ def test_the_anchor_holds_its_weight_unless_told_to_decay(tmp_path):
 def test_anchor_and_teacher_cannot_both_be_given():
     with pytest.raises(ValueError, match="--anchor"):
         TrainSettings(**BASE, teacher="pursuit", anchor="pursuit")
+
+
+def _rollout_noise(trainer: Trainer) -> float:
+    """The std of the actions a one-iteration run sampled around its actor's mean (the
+    actor held by the critic's warm-up, so the mean is the one the rollout drew from)."""
+    env, _ = trainer._make_env()
+    try:
+        runner = trainer._make_runner(env)
+        trainer._load_weights(runner)
+        runner.start()
+        runner.iteration(0)
+        observations = runner.alg.storage.observations.flatten(0, 1)
+        with torch.inference_mode():
+            means = runner.alg.actor(observations)
+        return float((runner.alg.storage.actions.flatten(0, 1) - means).std())
+    finally:
+        env.close()
+
+
+def test_min_std_keeps_the_action_noise_of_ppo_after_imitation_at_its_floor(taught, tmp_path):
+    """The imitation student's noise is 0.1 and PPO after it shrank it to 0.034 in 45
+    iterations (benchmarks/RESULTS.md); ``min_std`` is the floor its rollouts sample at."""
+    held = {**BASE, "iterations": 1, "critic_warmup": 1}
+    floored = Trainer(TrainSettings(**held, min_std=0.3), tmp_path / "f", TINY, clone=taught)
+    assert 0.25 < _rollout_noise(floored) < 0.35
+    plain = Trainer(TrainSettings(**held), tmp_path / "p", TINY, clone=taught)
+    assert _rollout_noise(plain) < 0.13
