@@ -123,8 +123,8 @@ class TrainSettings(BaseModel):
         None,
         gt=0.0,
         description="The lowest standard deviation of a continuous policy's action noise "
-        "(rsl-rl's std_range): PPO after imitation otherwise shrinks it until it stops "
-        "exploring. Default: no floor.",
+        "(rsl-rl's std_range); PPO after imitation otherwise shrinks it (0.1 to 0.02 in "
+        "one run). Default: no floor.",
     )
     critic_warmup: int | None = Field(
         None,
@@ -233,6 +233,15 @@ class TrainSettings(BaseModel):
             raise ValueError(
                 "--anchor holds PPO near a driver, and --teacher trains by imitation "
                 "without PPO: give one (clone a --teacher run to anchor its PPO)"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _min_std_needs_a_gaussian(self) -> TrainSettings:
+        if self.min_std is not None and self.discrete:
+            raise ValueError(
+                "--min-std floors a continuous policy's action noise; a discrete action "
+                "space draws from its action probabilities: leave --min-std out"
             )
         return self
 

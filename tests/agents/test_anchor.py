@@ -136,3 +136,9 @@ def test_min_std_keeps_the_action_noise_of_ppo_after_imitation_at_its_floor(taug
     assert 0.25 < _rollout_noise(floored) < 0.35
     plain = Trainer(TrainSettings(**held), tmp_path / "p", TINY, clone=taught)
     assert _rollout_noise(plain) < 0.13
+
+
+def test_min_std_is_refused_with_a_discrete_action_space():
+    discrete = {**BASE, "action_space": parse_action_space_spec("3x3@1.0")}
+    with pytest.raises(ValueError, match="--min-std"):
+        TrainSettings(**discrete, min_std=0.1)
