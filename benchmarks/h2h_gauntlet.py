@@ -13,9 +13,11 @@ races two-car heats, ``--races`` seeded races per rival with the grid alternatin
 
 One table, a row per (track, rival): the model's wins from behind and from ahead, the
 races started behind in which it got past the rival (at least one overtake), overtakes and
-at-fault collisions per race (the model's, ``arena.racing_metrics``), and
-the seconds a lap it lost in the races it started behind, against its solo laps (total
-time per lap minus the solo lap time; races it did not finish are left out and counted).
+at-fault collisions per race (the model's, ``arena.racing_metrics``), where those contacts
+came (:func:`contact_kinds`: in the standing start, running into the rival from behind,
+or alongside it), and the seconds a lap it lost in the races it started behind, against
+its solo laps (total time per lap minus the solo lap time; races it did not finish are
+left out and counted).
 
     .venv/bin/python benchmarks/h2h_gauntlet.py --model league/demo_models/sample-self-play.zip
     .venv/bin/python benchmarks/h2h_gauntlet.py --model M.zip --races 4 --laps 1  # quick
@@ -25,11 +27,13 @@ time per lap minus the solo lap time; races it did not finish are left out and c
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from statistics import mean
 from typing import Any
 
+import numpy as np
 from harness import ROOT, ResultTable, add_record_option, write
 from rich.progress import Progress
 
@@ -37,15 +41,21 @@ from arena.actions import ContinuousActionSpace
 from arena.config import CarConfig, RaceConfig, SeedVariation, resolve_track
 from arena.pursuit import PassingPursuitPolicy, PurePursuitPolicy
 from arena.race import RaceResult, StepGuard, run_race
+from arena.rules import SIDE_BY_SIDE_M
 from league.jobs.evaluation import model_car
 from slipstream.race import rotated
 from submissions import ModelFault, load_policy
 from tracks.catalog import builtin_names, get_track
+from tracks.track import Track
 
 SAMPLES = ROOT / "league" / "demo_models"
 PACES = (0.6, 0.8, 0.9, 1.0)
 DEEPRACER_WIDTH_M = 1.067
 ME, RIVAL = "model", "rival"
+# A contact in a race's first seconds belongs to the standing start (both cars launching
+# from the grid, 2 s: the teacher's START_FOLLOW_STEPS).
+START_S = 2.0
+CONTACT_KINDS = ("start", "rear", "side")
 SCRIPTED_ME = CarConfig(name=ME, action_space=ContinuousActionSpace())
 
 
@@ -119,7 +129,33 @@ def race_heat(model: Any, car: CarConfig, heat: Heat, track: str, laps: int, k: 
     return run_race(config, {ME: model, RIVAL: heat.driver}, guard=guard)
 
 
-def row(results: list[RaceResult], solo: float | None, laps: int) -> list[str]:
+def _position_before(trace: dict[str, list], t: float) -> tuple[float, float]:
+    """A car's ``(x, y)`` at its last trace row before simulated time ``t`` (the row of a
+    contact's own step may already hold the car frozen or moved for its penalty)."""
+    times = trace["t"]
+    i = max(0, int(np.searchsorted(times, t - 1e-9)) - 1)
+    return trace["x"][i], trace["y"][i]
+
+
+def contact_kinds(result: RaceResult, track: Track) -> Counter[str]:
+    """The model's at-fault contacts by where they came: ``start`` in the first
+    :data:`START_S` of the race, ``rear`` running into the car from more than
+    ``SIDE_BY_SIDE_M`` behind it (along the track, the step before), ``side`` closer."""
+    kinds: Counter[str] = Counter()
+    for event in result.events:
+        if event["kind"] != "contact" or event["car"] != ME or not event["at_fault"]:
+            continue
+        if event["t"] < START_S:
+            kinds["start"] += 1
+            continue
+        mine = _position_before(result.trace[ME], event["t"])
+        theirs = _position_before(result.trace[event["other"]], event["t"])
+        arcs = track.project(np.array([mine, theirs])).arc_length
+        kinds["rear" if track.arc_delta(arcs[0], arcs[1]) > SIDE_BY_SIDE_M else "side"] += 1
+    return kinds
+
+
+def row(results: list[RaceResult], solo: float | None, laps: int, track: Track) -> list[str]:
     """The table cells of one heat, from the model's side."""
     mine = [r.car(ME) for r in results]
     behind = [c for c in mine if (c.grid_offset or 0.0) < 0]
@@ -131,6 +167,7 @@ def row(results: list[RaceResult], solo: float | None, laps: int) -> list[str]:
 
     lost = [c.total_time / laps - solo for c in behind if c.total_time is not None and solo]
     unfinished = len(behind) - len(lost)
+    kinds = sum((contact_kinds(r, track) for r in results), Counter())
     lost_cell = "-" if not lost else f"{mean(lost):+.2f}"
     if unfinished:
         lost_cell += f" ({unfinished} DNF)"
@@ -140,6 +177,7 @@ def row(results: list[RaceResult], solo: float | None, laps: int) -> list[str]:
         f"{sum(1 for c in behind if c.overtakes > 0)}/{len(behind)}",
         f"{mean(c.overtakes for c in mine):.2f}",
         f"{mean(c.at_fault_collisions for c in mine):.2f}",
+        " / ".join(str(kinds[k]) for k in CONTACT_KINDS),
         lost_cell,
     ]
 
@@ -172,11 +210,12 @@ def main() -> None:
     subject = "the teacher" if args.teacher else args.model.name
     others = model_heats(field)
     columns = ["track", "rival", "wins from behind", "wins from ahead", "passed from behind",
-               "overtakes/race", "at-fault/race", "s/lap lost behind"]  # fmt: skip
+               "overtakes/race", "at-fault/race", "at-fault: start / rear / side",
+               "s/lap lost behind"]  # fmt: skip
     table = ResultTable(
         f"Gauntlet of {subject}: {args.races} races per rival, {args.laps} laps",
         columns,
-        "ll" + "r" * 6,
+        "ll" + "r" * 7,
     )
     with Progress() as progress:
         for track in args.tracks.split(","):
@@ -203,7 +242,7 @@ def main() -> None:
                 for k in range(args.races):
                     results.append(race_heat(model, car, heat, track, args.laps, k))
                     progress.advance(task)
-                table.add_row(track, heat.name, *row(results, solo, args.laps))
+                table.add_row(track, heat.name, *row(results, solo, args.laps, get_track(track)))
     write(table, args.record)
 
 
