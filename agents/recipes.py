@@ -131,11 +131,6 @@ RECIPES: dict[str, Recipe] = {
                 "action_space": RACING_ACTIONS,
                 "reward_fn": "head_to_head",
                 "anchor": "pursuit",  # PPO alone loses what imitation gave in minutes
-                # PPO shrank the student's action noise from 0.1 to 0.02; held at 0.1 the
-                # models of two seeds passed the slower racers as often or more and lost
-                # less time behind them (benchmarks/RESULTS.md, "The action noise under PPO
-                # after imitation").
-                "min_std": 0.1,
                 "selfplay": "pool",
                 **_RACE_TYPE_EVALS,
             },

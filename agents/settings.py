@@ -121,10 +121,10 @@ class TrainSettings(BaseModel):
     )
     min_std: float | None = Field(
         None,
-        ge=0.0,
+        gt=0.0,
         description="The lowest standard deviation of a continuous policy's action noise "
         "(rsl-rl's std_range); PPO after imitation otherwise shrinks it (0.1 to 0.02 in "
-        "one run). Default: no floor (0: none, undoing a recipe's).",
+        "one run). Default: no floor.",
     )
     critic_warmup: int | None = Field(
         None,
@@ -238,7 +238,7 @@ class TrainSettings(BaseModel):
 
     @model_validator(mode="after")
     def _min_std_needs_a_gaussian(self) -> TrainSettings:
-        if self.min_std and self.discrete:
+        if self.min_std is not None and self.discrete:
             raise ValueError(
                 "--min-std floors a continuous policy's action noise; a discrete action "
                 "space draws from its action probabilities: leave --min-std out"

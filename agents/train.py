@@ -226,7 +226,7 @@ class Trainer:
         actor, critic, groups = networks.model_configs(
             s.preset, s.sensors, s.action_space, s.critic
         )
-        if s.min_std:  # a Gaussian's (refused with a discrete space); 0 is no floor
+        if s.min_std is not None:  # a Gaussian's (refused with a discrete space)
             actor["distribution_cfg"] = {**actor["distribution_cfg"], "std_range": (s.min_std, 1e6)}
         cfg = self.hp.to_rsl_rl(
             env.num_envs, actor, critic, groups, s.steps_per_env, grow=s.grows_batch

@@ -130,12 +130,11 @@ def _rollout_noise(trainer: Trainer) -> float:
 
 def test_min_std_keeps_the_action_noise_of_ppo_after_imitation_at_its_floor(taught, tmp_path):
     """The imitation student's noise is 0.1 and PPO after it shrank it to 0.034 in 45
-    iterations (benchmarks/RESULTS.md); ``min_std`` is the floor its rollouts sample at,
-    and 0 none (undoing the head_to_model_ppo recipe's)."""
+    iterations (benchmarks/RESULTS.md); ``min_std`` is the floor its rollouts sample at."""
     held = {**BASE, "iterations": 1, "critic_warmup": 1}
     floored = Trainer(TrainSettings(**held, min_std=0.3), tmp_path / "f", TINY, clone=taught)
     assert 0.25 < _rollout_noise(floored) < 0.35
-    plain = Trainer(TrainSettings(**held, min_std=0.0), tmp_path / "p", TINY, clone=taught)
+    plain = Trainer(TrainSettings(**held), tmp_path / "p", TINY, clone=taught)
     assert _rollout_noise(plain) < 0.13
 
 
@@ -143,4 +142,3 @@ def test_min_std_is_refused_with_a_discrete_action_space():
     discrete = {**BASE, "action_space": parse_action_space_spec("3x3@1.0")}
     with pytest.raises(ValueError, match="--min-std"):
         TrainSettings(**discrete, min_std=0.1)
-    assert TrainSettings(**discrete, min_std=0.0).min_std == 0.0  # no floor: nothing to refuse

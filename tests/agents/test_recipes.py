@@ -75,7 +75,6 @@ def test_ppo_after_head_to_model_imitation_is_anchored_and_races_the_imitation_m
     settings = cli._settings(tmp_path / "r", "head_to_model_ppo", imitation, False, given)
     assert settings.opponent == (str((imitation / "model" / "model.zip").resolve()),)
     assert settings.teacher is None and settings.anchor == "pursuit"
-    assert settings.min_std == 0.1  # a floor under its action noise
     assert settings.selfplay == "pool" and settings.paced_rivals
     head_to_model = get_recipe("head_to_model").settings()
     for same in ("track", "sensors", "action_space", "preset"):  # what a clone must keep
