@@ -220,17 +220,18 @@ def main() -> None:
     with Progress() as progress:
         for track in args.tracks.split(","):
             resolve_track(RaceConfig.build(track=track, cars=[car]))  # unknown names fail here
+            road = get_track(track)
             if args.teacher:
-                model = PassingPursuitPolicy(get_track(track), car.action_space)
+                model = PassingPursuitPolicy(road, car.action_space)
             solo = solo_lap(model, car, track, args.laps)
-            length = get_track(track).length
+            length = road.length
             pace = length / solo if solo else 1.0
             table.notes.append(
                 f"{track}: solo lap {solo:.2f} s ({pace:.2f} m/s)"
                 if solo
                 else f"{track}: the model did not finish alone; rivals paced at 1 m/s"
             )
-            unpaced = PurePursuitPolicy(get_track(track), car.action_space)
+            unpaced = PurePursuitPolicy(road, car.action_space)
             rival_lap = solo_lap(unpaced, SCRIPTED_ME, track, args.laps)
             rival_pace = length / rival_lap if rival_lap else pace
             if rival_lap:
@@ -242,7 +243,7 @@ def main() -> None:
                 for k in range(args.races):
                     results.append(race_heat(model, car, heat, track, args.laps, k))
                     progress.advance(task)
-                table.add_row(track, heat.name, *row(results, solo, args.laps, get_track(track)))
+                table.add_row(track, heat.name, *row(results, solo, args.laps, road))
     write(table, args.record)
 
 
