@@ -67,8 +67,9 @@ class TrainingFeed:
     def _read(self, job_id: int, after: int) -> tuple[list[FeedEvent], bool]:
         """Events after ``after``, and whether the job has ended with nothing more to read."""
         with self._sessions() as session:
-            events = read_events(session, job_id, after)
+            # the status first: a job seen ended has committed its last events before
             status = session.scalar(select(TrainingJob.status).where(TrainingJob.id == job_id))
+            events = read_events(session, job_id, after)
         return events, status is None or (status in ENDED and len(events) < BATCH)
 
     async def _poll(self, job_id: int, feed: _JobFeed) -> None:

@@ -3,17 +3,20 @@ the client's reading of a training job's Server-Sent Events; on SQLite and Postg
 
 from __future__ import annotations
 
+import asyncio
 import re
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import typer
-from sqlalchemy import func, select
+from sqlalchemy import event, func, select
+from sqlalchemy.orm import ORMExecuteState, Session
 from typer.testing import CliRunner
 
 from league.cli import _follow, app
 from league.client import LeagueClient, LeagueError, _server_sent_events
+from league.http.training_feed import TrainingFeed
 from league.models import TrainingJob, utcnow
 from league.training.queue import add_event
 from league.training.sandbox import probe
@@ -193,6 +196,34 @@ def test_the_client_reads_a_jobs_events_in_order_and_resumes(
         pytest.raises(LeagueError, match="not found among your jobs"),
     ):
         next(client.training_events(job_id))
+
+
+def test_a_job_that_ends_while_the_feed_reads_it_still_streams_its_last_events(
+    league: League,
+) -> None:
+    """The feed's poll reads a job's events and its status in two statements; a trainer
+    that reports its last events and ends between the two loses no event."""
+    job_id = _job(league, "running", started_at=utcnow())
+    _add(league, job_id, EVENTS[:2])
+    ended_between = []
+
+    def end_after_first_statement(state: ORMExecuteState) -> object:
+        frozen = state.invoke_statement().freeze()
+        if not ended_between:
+            ended_between.append(True)
+            _add(league, job_id, EVENTS[2:], status="done")
+        return frozen()
+
+    def sessions() -> Session:
+        session = league.sessions()
+        event.listen(session, "do_orm_execute", end_after_first_statement)
+        return session
+
+    async def follow() -> list[tuple[str, dict]]:
+        return [(e.kind, e.data) async for e in TrainingFeed(sessions).follow(job_id, 0)]
+
+    assert asyncio.run(asyncio.wait_for(follow(), 30)) == EVENTS
+    assert ended_between
 
 
 def test_following_a_job_prints_its_iterations_and_how_it_ended(
