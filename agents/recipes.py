@@ -20,6 +20,11 @@ from agents.settings import TrainSettings
 
 # Continuous steering of +-30 degrees at 0.5 to 4 m/s: room to learn the racing line.
 RACING_ACTIONS = "continuous:-30:30:0.5:4"
+# The camera-only recipes' network reads the last two camera frames (DeepRacer's defaults
+# otherwise): it sees how fast the road and the cars ahead move, and with DeepRacer's
+# lagging steering it laps at its teacher's pace where one frame left it 1.5-2.3 times
+# slower (benchmarks/RESULTS.md, "The self-play sample: two tracks, then two camera frames").
+TWO_FRAMES = {"stack_size": 2}
 
 
 @dataclass(frozen=True)
@@ -63,7 +68,8 @@ RECIPES: dict[str, Recipe] = {
     for recipe in (
         Recipe(
             name="time_trial",
-            summary="beginner_loop, camera, continuous 0.5-4 m/s; imitates the pursuit driver",
+            summary="beginner_loop, camera (two frames), continuous 0.5-4 m/s; imitates the "
+            "pursuit driver",
             options={
                 "race_type": "time_trial",
                 "track": "beginner_loop",
@@ -73,6 +79,7 @@ RECIPES: dict[str, Recipe] = {
                 "teacher": "pursuit",
                 **_RACE_TYPE_EVALS,
             },
+            hyperparameters=TWO_FRAMES,
         ),
         Recipe(
             name="object_avoidance",
@@ -117,6 +124,7 @@ RECIPES: dict[str, Recipe] = {
                 "selfplay": "pool",
                 **_RACE_TYPE_EVALS,
             },
+            hyperparameters=TWO_FRAMES,  # the parent's: a clone needs its network
             parent="time_trial",
         ),
         Recipe(
@@ -134,6 +142,7 @@ RECIPES: dict[str, Recipe] = {
                 "selfplay": "pool",
                 **_RACE_TYPE_EVALS,
             },
+            hyperparameters=TWO_FRAMES,
             parent="head_to_model",
         ),
         Recipe(

@@ -144,9 +144,12 @@ class Trainer:
     ) -> None:
         run_dir = Path(run_dir)
         stored = Run.load(run_dir) if resume else None
-        hp = hyperparameters or (stored.hyperparameters if stored else Hyperparameters())
-        self.target = Run(run_dir, settings, hp)
         self.clone = Run.load(clone) if clone else None
+        hp = hyperparameters or (stored.hyperparameters if stored else Hyperparameters())
+        if self.clone is not None and "stack_size" not in hp.model_fields_set:
+            # A clone's network reads as many frames as its parent's, unless told otherwise.
+            hp = hp.model_copy(update={"stack_size": self.clone.stack_size})
+        self.target = Run(run_dir, settings, hp)
         self.resume = resume
         if stored is None and holds_run(run_dir):
             raise ValueError(
@@ -283,7 +286,8 @@ class Trainer:
             except RuntimeError as exc:
                 raise ValueError(
                     f"cannot clone {self.clone.path}: its network does not match this run's "
-                    "(same sensors, network preset and number of actions are needed)"
+                    "(same sensors, network preset, number of actions and stack_size are "
+                    "needed)"
                 ) from exc
 
     @staticmethod

@@ -29,6 +29,17 @@ def test_every_race_type_has_a_recipe_whose_options_are_train_options():
         assert recipe.parent is None or recipe.parent in RECIPES
 
 
+def test_camera_recipes_read_two_frames_as_the_parents_they_clone():
+    """The camera-only recipes stack two frames (DeepRacer's ``stack_size``), and a recipe
+    that clones another's run reads as many as its parent: a clone needs its network."""
+    for name in ("time_trial", "head_to_model", "head_to_model_ppo"):
+        assert get_recipe(name).hyperparameters_model().stack_size == 2, name
+    for recipe in RECIPES.values():
+        if recipe.parent is not None:
+            frames = recipe.hyperparameters_model().stack_size
+            assert frames == get_recipe(recipe.parent).hyperparameters_model().stack_size
+
+
 def test_list_recipes_shows_each_one_without_needing_out():
     result = CliRunner().invoke(app, ["train", "--list-recipes"])
     assert result.exit_code == 0, result.output
