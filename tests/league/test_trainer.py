@@ -139,6 +139,7 @@ def test_a_killed_trainers_job_is_finished_by_another_and_its_model_races(
         track="slipstream_speedway",
         sensors=policy.info.sensors,
         action_space=policy.info.action_space,
+        stack_size=policy.info.stack_size,  # the time_trial recipe's two frames
     )
     config = config.model_copy(update={"laps": 1, "time_limit_s": 10.0})
     raced = run_race(config, {"car0": policy})
