@@ -105,9 +105,11 @@ def test_a_clone_reads_as_many_frames_as_its_parent_unless_told(run: Path, tmp_p
     told = Trainer(settings, tmp_path / "c", Hyperparameters(stack_size=1), clone=run)
     assert told.hp.stack_size == 1
 
+    cheap = tmp_path / "hyperparameters.json"  # a DeepRacer file without stack_size
+    cheap.write_text(json.dumps({k: v for k, v in STACKED.items() if k != "stack_size"}))
     args = ["train", "--out", str(tmp_path / "d"), "--clone", str(run), "--sensors", "camera"]
     args += ["--action-space", "3x3@1.0", "--iterations", "1", "--workers", "0", "--races", "1"]
-    args += ["--eval-every", "1", "--eval-time-limit", "2"]
+    args += ["--eval-every", "1", "--eval-time-limit", "2", "--hyperparameters", str(cheap)]
     cloned = CliRunner().invoke(app, args)
     assert cloned.exit_code == 0, cloned.output
     assert validate(tmp_path / "d" / "model" / "model.zip").info.stack_size == 3
