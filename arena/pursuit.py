@@ -470,6 +470,11 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         self._side = 0.0  # which side of it: 1 left, -1 right
         self._after_box = False  # rejoining the line after a box (at PASS_SPEED)
 
+    @property
+    def is_passing(self) -> bool:
+        """Whether a pass of a car or a box is under way (as of the last command)."""
+        return self._passing is not None
+
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
         """The racing-line command, or one aimed beside an object in the way.
 

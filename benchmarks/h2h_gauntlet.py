@@ -121,6 +121,26 @@ def rivals(track_name: str, pace: float, rival_pace: float, models: list[Heat]) 
     return heats
 
 
+def field_on(
+    track: str, model: Any, car: CarConfig, laps: int, models: list[Heat], notes: list[str]
+) -> tuple[float | None, list[Heat]]:
+    """The model's solo lap on ``track`` and its field there (:func:`rivals`, paced by that
+    lap against the pursuit driver's own); what both laps were goes to ``notes``."""
+    road = get_track(track)
+    solo = solo_lap(model, car, track, laps)
+    pace = road.length / solo if solo else 1.0
+    notes.append(
+        f"{track}: solo lap {solo:.2f} s ({pace:.2f} m/s)"
+        if solo
+        else f"{track}: the model did not finish alone; rivals paced at 1 m/s"
+    )
+    rival_lap = solo_lap(PurePursuitPolicy(road, car.action_space), SCRIPTED_ME, track, laps)
+    rival_pace = road.length / rival_lap if rival_lap else pace
+    if rival_lap:
+        notes.append(f"{track}: the pursuit driver alone {rival_lap:.2f} s a lap")
+    return solo, rivals(track, pace, rival_pace, models)
+
+
 def race_heat(model: Any, car: CarConfig, heat: Heat, track: str, laps: int, k: int) -> RaceResult:
     """Race ``k`` of a heat: seed ``k``, the model behind on even ``k``."""
     config = RaceConfig.build(cars=[heat.car, car], **_rules(track, laps, k, "head_to_model"))
@@ -223,20 +243,7 @@ def main() -> None:
             road = get_track(track)
             if args.teacher:
                 model = PassingPursuitPolicy(road, car.action_space)
-            solo = solo_lap(model, car, track, args.laps)
-            length = road.length
-            pace = length / solo if solo else 1.0
-            table.notes.append(
-                f"{track}: solo lap {solo:.2f} s ({pace:.2f} m/s)"
-                if solo
-                else f"{track}: the model did not finish alone; rivals paced at 1 m/s"
-            )
-            unpaced = PurePursuitPolicy(road, car.action_space)
-            rival_lap = solo_lap(unpaced, SCRIPTED_ME, track, args.laps)
-            rival_pace = length / rival_lap if rival_lap else pace
-            if rival_lap:
-                table.notes.append(f"{track}: the pursuit driver alone {rival_lap:.2f} s a lap")
-            heats = rivals(track, pace, rival_pace, others)
+            solo, heats = field_on(track, model, car, args.laps, others, table.notes)
             task = progress.add_task(track, total=len(heats) * args.races)
             for heat in heats:
                 results = []

@@ -14,6 +14,7 @@ from arena.config import SeedVariation
 from arena.drivers import LaneFollowerPolicy
 from arena.pursuit import (
     DEFAULT_LIMITS,
+    START_FOLLOW_STEPS,
     PassingPursuitPolicy,
     PurePursuitPolicy,
     car_limits,
@@ -165,9 +166,10 @@ def test_passing_pursuit_gets_past_bots_on_the_narrow_loop() -> None:
 RACING = "continuous:-30:30:0.5:4"
 
 
-def _duel(track_name: str, leader, laps: int, seed: int):
+def _duel(track_name: str, leader, laps: int, seed: int, passer=PassingPursuitPolicy):
     """Head to model on ``track_name`` with the races' noise: ``leader(track, space)``
-    drives ``car0`` in front, the passing driver ``car1`` 0.8 m back; both results."""
+    drives ``car0`` in front, the passing driver (``passer``) ``car1`` 0.8 m back; both
+    results."""
     space = parse_action_space_spec(RACING)
     track = get_track(track_name)
     config = arena.make_config(
@@ -180,7 +182,7 @@ def _duel(track_name: str, leader, laps: int, seed: int):
         sensors=("sector_lidar",),
         variation=SeedVariation(shuffle_grid=False),  # car0 in front, car1 0.8 m back
     )
-    policies = {"car0": leader(track, space), "car1": PassingPursuitPolicy(track, space)}
+    policies = {"car0": leader(track, space), "car1": passer(track, space)}
     race = run_race(config, policies, record_trace=False)
     return race.car("car0"), race.car("car1")
 
@@ -231,10 +233,19 @@ def test_passing_pursuit_passes_a_slower_racing_car_on_a_real_width_track() -> N
 
 
 def _held_to(speed: float):
-    """A centre-line follower (the gauntlet's paced rival) held to ``speed`` m/s."""
+    """A centre-line follower held to ``speed`` m/s."""
 
     def build(track, space):
         return LaneFollowerPolicy(track, space, speed)
+
+    return build
+
+
+def _paced(share: float):
+    """A pursuit driver on the racing line at ``share`` of its pace (the gauntlet's)."""
+
+    def build(track, space):
+        return PurePursuitPolicy(track, space, pace=share)
 
     return build
 
@@ -251,6 +262,23 @@ def test_passing_pursuit_passes_a_car_at_60_percent_of_its_pace_on_the_speedway(
         assert passer.overtakes >= 1 and slow.times_overtaken >= 1, seed
         assert passer.at_fault_collisions == 0 and passer.crash_count == 0, seed
         assert passer.finish_position == 1, seed
+
+
+def test_the_driver_says_when_a_pass_is_under_way() -> None:
+    """``is_passing`` (what ``benchmarks/teacher_agreement.py`` compares a model's actions
+    with) is off while every car is followed from the start, on during the pass of a
+    pursuit driver at 60% of its pace on the speedway, and off again once past it."""
+
+    class Recording(PassingPursuitPolicy):
+        def act(self, observation, params=None):
+            action = super().act(observation, params)
+            seen.append(self.is_passing)
+            return action
+
+    seen: list[bool] = []
+    _, passer = _duel(SPEEDWAY, _paced(0.6), laps=2, seed=0, passer=Recording)
+    assert passer.overtakes >= 1
+    assert not any(seen[:START_FOLLOW_STEPS]) and any(seen) and not seen[-1]
 
 
 def test_passing_pursuit_rarely_runs_into_a_car_held_after_leaving_the_road() -> None:
@@ -295,11 +323,8 @@ def test_passing_pursuit_passes_a_slower_racer_on_its_line_without_contact() -> 
     to the pass (2 laps in 15.7-15.8 s, 7.2 s a lap alone); beside the rival out of the
     hairpin it had slowed for the arc back to the line, and took 18.6-18.7 s."""
 
-    def paced(track, space):
-        return PurePursuitPolicy(track, space, pace=0.6)
-
     for seed in range(3):
-        slow, passer = _duel(SPEEDWAY, paced, laps=2, seed=seed)
+        slow, passer = _duel(SPEEDWAY, _paced(0.6), laps=2, seed=seed)
         assert passer.finish_position == 1 and slow.finish_position == 2, seed
         assert passer.at_fault_collisions == 0 and passer.crash_count == 0, seed
         assert passer.total_time < 17.0, seed
@@ -313,11 +338,8 @@ def test_passing_pursuit_passes_a_racer_at_80_percent_of_its_pace_on_grand_tour(
     rival was a metre ahead, the teacher sat behind it for both laps (39.1-39.5 s; now
     35.6-35.8 s, 8 passes in seeds 0-7)."""
 
-    def paced(track, space):
-        return PurePursuitPolicy(track, space, pace=0.8)
-
     for seed in range(3):
-        slow, passer = _duel("grand_tour", paced, laps=2, seed=seed)
+        slow, passer = _duel("grand_tour", _paced(0.8), laps=2, seed=seed)
         assert passer.overtakes >= 1 and slow.times_overtaken >= 1, seed
         assert passer.at_fault_collisions == 0 and passer.crash_count == 0, seed
         assert passer.finish_position == 1 and passer.total_time < 37.0, seed
