@@ -117,12 +117,41 @@ class BehaviourCloning(Distillation):
     """
 
     def __init__(
-        self, *args: Any, num_mini_batches: int = 1, discrete: bool = False, **kwargs: Any
+        self,
+        *args: Any,
+        num_mini_batches: int = 1,
+        discrete: bool = False,
+        teacher_drives: float = 0.0,
+        **kwargs: Any,
     ):
         super().__init__(*args, **kwargs)
         self.num_mini_batches = num_mini_batches
         self.discrete = discrete
         self.teacher_loaded = True  # the teacher is the pursuit driver, not a network
+        self.teacher_drives = teacher_drives
+        self._driven: torch.Tensor | None = None  # per learner slot: the teacher drives
+
+    def act(self, obs: TensorDict) -> torch.Tensor:
+        """The student's sampled actions, and the teacher's instead in the episodes it
+        drives (``teacher_drives``: each episode's chance, drawn when it starts)."""
+        actions = super().act(obs)
+        if not self.teacher_drives:
+            return actions
+        if self._driven is None:
+            self._driven = self._draw(actions.shape[0])
+        return torch.where(self._driven.unsqueeze(-1), obs[EXPERT_GROUP], actions)
+
+    def process_env_step(
+        self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: Any
+    ) -> None:
+        """rsl-rl's step record; a slot whose episode ended draws who drives the next."""
+        super().process_env_step(obs, rewards, dones, extras)
+        if self._driven is not None:
+            ended = dones.view(-1).bool()
+            self._driven = torch.where(ended, self._draw(ended.numel()), self._driven)
+
+    def _draw(self, count: int) -> torch.Tensor:
+        return torch.rand(count, device=self.device) < self.teacher_drives
 
     def update(self) -> dict[str, float]:
         """Epochs of shuffled mini-batches: the student's outputs onto the teacher's."""
@@ -165,13 +194,15 @@ class BehaviourCloning(Distillation):
         return True
 
 
-def imitation_config(ppo_cfg: dict[str, Any], discrete: bool) -> dict[str, Any]:
+def imitation_config(
+    ppo_cfg: dict[str, Any], discrete: bool, teacher_drives: float = 0.0
+) -> dict[str, Any]:
     """rsl-rl's runner config for imitation, from the PPO config of the same run.
 
     The student is PPO's actor (same network, so the run can be cloned into PPO); its
     learning rate, epochs and mini-batches are PPO's (DeepRacer's ``lr``, ``num_epochs``,
     ``batch_size``); a Gaussian student's noise is :data:`STUDENT_STD`; the teacher is
-    :class:`ExpertModel`.
+    :class:`ExpertModel`, and drives that share of the episodes (``teacher_drives``).
     """
     ppo = ppo_cfg["algorithm"]
     student = dict(ppo_cfg["actor"])
@@ -188,6 +219,7 @@ def imitation_config(ppo_cfg: dict[str, Any], discrete: bool) -> dict[str, Any]:
             "max_grad_norm": ppo["max_grad_norm"],
             "gradient_length": 1,
             "discrete": discrete,
+            "teacher_drives": teacher_drives,
         },
         "student": student,
         "teacher": {"class_name": TEACHER_CLASS},

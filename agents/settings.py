@@ -104,6 +104,14 @@ class TrainSettings(BaseModel):
         "(pure pursuit on the racing line, steering around boxes and cars; "
         "agents.imitation). Clone the run to go on with PPO and the reward function.",
     )
+    teacher_drives: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="With --teacher: the share of episodes the teacher drives (each "
+        "episode's chance), the student learning from their states too; 0: the student "
+        "drives every episode.",
+    )
     anchor: Literal["pursuit"] | None = Field(
         None,
         description="PPO held near this driver: PPO's loss gains the distance of the "
@@ -234,6 +242,12 @@ class TrainSettings(BaseModel):
                 "--anchor holds PPO near a driver, and --teacher trains by imitation "
                 "without PPO: give one (clone a --teacher run to anchor its PPO)"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _teacher_drives_needs_a_teacher(self) -> TrainSettings:
+        if self.teacher_drives and self.teacher is None:
+            raise ValueError("--teacher-drives needs --teacher: it is a share of imitation")
         return self
 
     @model_validator(mode="after")

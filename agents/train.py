@@ -235,7 +235,7 @@ class Trainer:
             env.num_envs, actor, critic, groups, s.steps_per_env, grow=s.grows_batch
         )
         if s.teacher is not None:
-            cfg = imitation_config(cfg, s.discrete)
+            cfg = imitation_config(cfg, s.discrete, s.teacher_drives)
         warmup = self._critic_warmup()
         if s.anchor is not None or warmup:
             anchored = s.anchor is not None

@@ -131,6 +131,26 @@ def test_a_camera_student_learns_what_the_teacher_does_where_it_drives(tmp_path)
     assert error < 0.8 * variance, (error, variance)
 
 
+def test_episodes_the_teacher_drives_lap_where_a_fresh_student_does_not(tmp_path):
+    """``teacher_drives``: the teacher's actions drive that share of the episodes (the
+    student still learns from every state). Driven by it, both cars of a fresh run lap
+    the loop in the first rollout; the untrained student drives off the road."""
+
+    def first_rollout(share: float) -> dict[str, str]:
+        settings = TrainSettings(
+            action_space=CONTINUOUS, sensors=("lidar",), teacher="pursuit", teacher_drives=share,
+            workers=0, races=2, iterations=1, steps_per_env=200, eval_every=1000,
+        )  # fmt: skip
+        Trainer(settings, tmp_path / str(share), TINY).run()
+        with (tmp_path / str(share) / "metrics.csv").open(newline="") as handle:
+            return next(csv.DictReader(handle))
+
+    assert float(first_rollout(1.0)["lap_completion"]) == 1.0
+    assert float(first_rollout(0.0)["lap_completion"]) == 0.0
+    with pytest.raises(ValueError, match="--teacher-drives needs --teacher"):
+        TrainSettings(action_space=CONTINUOUS, teacher_drives=0.5)
+
+
 def test_an_imitation_run_resumes_and_clones_into_ppo(tmp_path):
     base = {
         "action_space": DISCRETE,
