@@ -472,7 +472,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
 
     @property
     def is_passing(self) -> bool:
-        """Whether a pass of a car or a box is under way (as of the last command)."""
+        """Whether a pass of a car is under way (as of the last command)."""
         return self._passing is not None
 
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
