@@ -102,6 +102,11 @@ def model_heats(field: list[Path]) -> list[Heat]:
     return heats
 
 
+def paced_name(share: float) -> str:
+    """The heat name of the pursuit driver paced to ``share`` of the model's pace."""
+    return f"pursuit {share:.0%}"
+
+
 def rivals(track_name: str, pace: float, rival_pace: float, models: list[Heat]) -> list[Heat]:
     """The field on one track: the paced pursuit drivers (``rival_pace``: the pursuit
     driver's own, m/s), the other models, the teacher."""
@@ -110,7 +115,7 @@ def rivals(track_name: str, pace: float, rival_pace: float, models: list[Heat]) 
     space = scripted.action_space
     heats = [
         Heat(
-            f"pursuit {p:.0%}",
+            paced_name(p),
             scripted,
             PurePursuitPolicy(track, space, pace=min(1.0, p * pace / rival_pace)),
         )

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from h2h_gauntlet import ME, SAMPLES, field_on, race_heat
+from h2h_gauntlet import ME, PACES, SAMPLES, field_on, paced_name, race_heat
 from harness import ResultTable, add_record_option, write
 
 from arena.actions import ContinuousActionSpace
@@ -41,7 +41,7 @@ from league.jobs.evaluation import model_car
 from submissions import load_policy
 from tracks.catalog import get_track
 
-SLOWER = ("pursuit 60%", "pursuit 80%", "pursuit 90%")
+SLOWER = tuple(paced_name(p) for p in PACES if p < 1.0)  # the heats of slower racers
 
 
 class ShadowedModel:
