@@ -173,6 +173,7 @@ class Trainer:
         self.pursuit_lap_s: float | None = None  # measured once, for paced pool racers
         self.best_score = stored.best_score() if stored else None
         self.fastest_lap = stored.fastest_lap() if stored else None
+        self.critic_warmup = self._critic_warmup()
 
     @property
     def settings(self) -> TrainSettings:
@@ -236,7 +237,7 @@ class Trainer:
         )
         if s.teacher is not None:
             cfg = imitation_config(cfg, s.discrete, s.teacher_drives)
-        warmup = self._critic_warmup()
+        warmup = self.critic_warmup
         if s.anchor is not None or warmup:
             anchored = s.anchor is not None
             cfg = anchored_config(
@@ -306,7 +307,12 @@ class Trainer:
 
     def _save_if_best(self, content: dict[str, Any], evaluation: EvalSummary) -> None:
         """Keep ``content`` as ``best.pt`` when ``evaluation`` beats the run's best, and as
-        ``fastest.pt`` when its best lap beats the run's fastest."""
+        ``fastest.pt`` when its best lap beats the run's fastest.
+
+        Evaluations within the critic warm-up race the clone's actor unchanged, not this
+        run's: they compete for neither (a run packing them would pack its parent)."""
+        if int(content["iteration"]) < self.critic_warmup:
+            return
         kept = {"eval_score": list(evaluation.score), "eval_best_lap": evaluation.best_lap}
         if self.best_score is None or evaluation.score > self.best_score:
             self.best_score = evaluation.score

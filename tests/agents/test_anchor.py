@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from agents.action_spaces import parse_action_space_spec
+from agents.evaluate import EvalSummary
 from agents.hyperparameters import Hyperparameters
 from agents.imitation import EXPERT_GROUP
 from agents.run import Run
@@ -64,6 +65,26 @@ def test_the_actor_is_held_while_the_critic_warms_up_and_moves_after(taught, tmp
     Trainer(moved, tmp_path / "moved", TINY, clone=taught).run()
     after = _actor_weights(tmp_path / "moved")
     assert any(not torch.equal(after[k], v) for k, v in parent.items())
+
+
+def test_evaluations_in_the_critic_warm_up_are_not_kept_as_the_run_s_best(
+    taught, tmp_path, monkeypatch
+):
+    """The warm-up races the parent's actor: its evaluations, however good, are not this
+    run's model (the PPO stage packed its imitation parent unchanged, RESULTS.md)."""
+    perfect = EvalSummary(3, 100.0, 8.0, 24.0, 0, 0, 0, "finished")
+    worse = EvalSummary(3, 100.0, 9.0, 30.0, 1, 0, 1, "finished")
+    scripted = [perfect, perfect, worse]  # iterations 0 and 1 warm the critic up
+    monkeypatch.setattr(Trainer, "_evaluate", lambda trainer, runner: scripted.pop(0))
+    settings = TrainSettings(**{**BASE, "eval_every": 1}, iterations=3, critic_warmup=2)
+    Trainer(settings, tmp_path / "ppo", TINY, clone=taught).run()
+    assert not scripted
+    for which in ("best", "fastest"):
+        kept = torch.load(tmp_path / "ppo" / "checkpoints" / f"{which}.pt", weights_only=True)
+        assert kept["iteration"] == 2, which
+    moved = _actor_weights(tmp_path / "ppo")  # the packed model is the actor after warm-up
+    parent = _actor_weights(taught)
+    assert any(not torch.equal(moved[k], v) for k, v in parent.items())
 
 
 def _distance_to_teacher(trainer: Trainer, iterations: int) -> tuple[list[float], float]:
