@@ -139,6 +139,7 @@ RECIPES: dict[str, Recipe] = {
                 "action_space": RACING_ACTIONS,
                 "reward_fn": "head_to_head",
                 "anchor": "pursuit",  # PPO alone loses what imitation gave in minutes
+                "anchor_weight": 4.0,  # at 1 it lost the teacher's pace (RESULTS.md)
                 "selfplay": "pool",
                 **_RACE_TYPE_EVALS,
             },
