@@ -237,12 +237,11 @@ class Trainer:
         )
         if s.teacher is not None:
             cfg = imitation_config(cfg, s.discrete, s.teacher_drives)
-        warmup = self.critic_warmup
-        if s.anchor is not None or warmup:
+        if s.anchor is not None or self.critic_warmup:
             anchored = s.anchor is not None
             cfg = anchored_config(
                 cfg,
-                critic_warmup=warmup,
+                critic_warmup=self.critic_warmup,
                 anchor_weight=s.anchor_weight if anchored else 0.0,
                 anchor_updates=s.anchor_iterations if anchored else None,
                 discrete=s.discrete,
