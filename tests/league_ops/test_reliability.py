@@ -17,6 +17,7 @@ import threading
 import time
 from collections import Counter, defaultdict
 
+import pytest
 from sqlalchemy import func, make_url, select
 
 from arena.config import RaceConfig
@@ -97,6 +98,8 @@ def test_kill_9_workers_mid_race_every_job_completes_exactly_once(ops: Ops) -> N
     while not all_settled(ops) and kills < 14 and time.monotonic() < deadline:
         # Kill while a race is under way (races are short: waiting blindly can miss them).
         while not statuses(ops).get("running") and not all_settled(ops):
+            if time.monotonic() > deadline:
+                pytest.fail(f"no job running or settled in 150 s: {statuses(ops)}")
             time.sleep(0.05)
         time.sleep(rng.uniform(0.0, 0.5))
         victim = rng.choice(list(workers))
