@@ -87,9 +87,11 @@ def test_a_discrete_student_learns_the_teachers_action_not_its_own():
     assert torch.equal(after.argmax(dim=1), taught), (after, taught)
 
 
-def _student_and_teacher(actor: torch.nn.Module, steps: int = 300) -> torch.Tensor:
-    """The student's greedy actions and the teacher's, stacked (2 x samples x action), in
-    the states the student drives into in two races."""
+def _student_and_teacher(
+    actor: torch.nn.Module, steps: int = 300
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The student's greedy actions and the teacher's (samples x (steering, speed)), in the
+    states the student drives into in two races."""
     env = _env(CONTINUOUS, sensors=("camera",), races=2)
     student, teacher = [], []
     try:
@@ -102,7 +104,7 @@ def _student_and_teacher(actor: torch.nn.Module, steps: int = 300) -> torch.Tens
             obs, *_ = env.step(action)
     finally:
         env.close()
-    return torch.stack([torch.cat(student), torch.cat(teacher)])
+    return torch.cat(student), torch.cat(teacher)
 
 
 @pytest.mark.slow
