@@ -475,6 +475,12 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         """Whether a pass of a car is under way (as of the last command)."""
         return self._passing is not None
 
+    @property
+    def pass_side(self) -> float | None:
+        """The side of the car being passed that this car goes by (1 left, -1 right), None
+        when no pass is under way (as of the last command)."""
+        return self._side if self._passing is not None else None
+
     def command_for(self, params: dict[str, Any]) -> tuple[float, float]:
         """The racing-line command, or one aimed beside an object in the way.
 

@@ -12,12 +12,17 @@ ahead within the teacher's planning horizon:
 - how far the model's steering is from the teacher's (normalised action, 0-2) when the
   teacher would pass and when it would follow;
 - how much faster than the teacher's command the model drives (m/s) in each;
+- how often a race the teacher would begin a pass (a model that hesitates makes it begin,
+  give up and begin again), and in how many of the steps it would be passing the model
+  car is out on the teacher's side of the rival;
 
 and per race the model's overtakes and at-fault contacts. A model that follows where the
 teacher would pass, or drives faster than it where it would follow (into the rival), shows
 here what its gauntlet row does not say.
 
     .venv/bin/python benchmarks/teacher_agreement.py --model league/demo_models/sample-self-play.zip
+
+``--teacher`` drives the teacher itself in the model's place: its own rows to compare with.
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from h2h_gauntlet import ME, PACES, SAMPLES, field_on, paced_name, race_heat
+from h2h_gauntlet import ME, PACES, SAMPLES, SCRIPTED_ME, field_on, paced_name, race_heat
 from harness import ResultTable, add_record_option, write
 
 from arena.actions import ContinuousActionSpace
@@ -46,7 +51,8 @@ SLOWER = tuple(paced_name(p) for p in PACES if p < 1.0)  # the heats of slower r
 
 class ShadowedModel:
     """The model's policy, with the teacher reading the same params each step; records
-    ``(teacher passing, teacher action, model action)`` with the rival ahead in range."""
+    ``(teacher passing, teacher action, model action, model car on the teacher's pass
+    side)`` with the rival ahead in range, and counts the passes the teacher begins."""
 
     needs_params = True
 
@@ -54,6 +60,7 @@ class ShadowedModel:
         self.model, self.teacher = model, teacher
         self.rows: list[tuple[float, ...]] = []
         self.steps = 0
+        self.passes_begun = 0
 
     def reset(self) -> None:
         """Start of a race, for both."""
@@ -63,8 +70,11 @@ class ShadowedModel:
 
     def act(self, observation: dict[str, Any], params: dict[str, Any]) -> Any:
         """The model's action; the teacher's, from the same params, is recorded beside it."""
-        action = self.model.act(observation)
+        scripted = getattr(self.model, "needs_params", False)  # --teacher
+        action = self.model.act(observation, params) if scripted else self.model.act(observation)
+        was_passing = self.teacher.is_passing
         shadow = self.teacher.act(observation, params)
+        self.passes_begun += self.teacher.is_passing and not was_passing
         self.steps += 1
         if params["objects_distance"] and self.steps > START_FOLLOW_STEPS:
             ahead = params["objects_distance"][0]  # the one rival
@@ -72,13 +82,26 @@ class ShadowedModel:
             horizon = max(PASS_HORIZON_M, PASS_HORIZON_S * float(params["speed"]))
             if 0.0 < gap <= horizon:
                 passing = float(self.teacher.is_passing)
-                self.rows.append((passing, *np.asarray(shadow), *np.asarray(action)))
+                side = self.teacher.pass_side or 0.0
+                on_side = float(side * (_offset(params) - _rival_offset(params)) > 0.0)
+                self.rows.append((passing, *np.asarray(shadow), *np.asarray(action), on_side))
         return action
+
+
+def _offset(params: dict[str, Any]) -> float:
+    """The model car's lateral offset (m, left positive)."""
+    return (1.0 if params["is_left_of_center"] else -1.0) * float(params["distance_from_center"])
+
+
+def _rival_offset(params: dict[str, Any]) -> float:
+    """The rival's lateral offset (m, left positive)."""
+    left = params["objects_left_of_center"][0]
+    return (1.0 if left else -1.0) * float(params["objects_distance_from_center"][0])
 
 
 def agreement(rows: list[tuple[float, ...]], space: ContinuousActionSpace) -> list[str]:
     """The table's cells of agreement for one heat's recorded steps."""
-    d = np.array(rows).reshape(-1, 5)
+    d = np.array(rows).reshape(-1, 6)
     passing = d[:, 0] == 1.0
     steer = np.abs(d[:, 3] - d[:, 1])
     faster = (d[:, 4] - d[:, 2]) * (space.speed.high - space.speed.low) / 2.0
@@ -93,6 +116,7 @@ def agreement(rows: list[tuple[float, ...]], space: ContinuousActionSpace) -> li
         mean(steer, ~passing, ".2f"),
         mean(faster, passing, "+.2f"),
         mean(faster, ~passing, "+.2f"),
+        mean(d[:, 5] * 100.0, passing, ".0f") + ("%" if passing.any() else ""),
     ]
 
 
@@ -103,22 +127,29 @@ def main() -> None:
     parser.add_argument("--tracks", default="slipstream_speedway,grand_tour")
     parser.add_argument("--races", type=int, default=10, help="races started behind per rival")
     parser.add_argument("--laps", type=int, default=2)
+    parser.add_argument("--teacher", action="store_true", help="the teacher drives instead")
     add_record_option(parser)
     args = parser.parse_args()
-    model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
-    car = model_car(ME, model.info.model_dump(mode="json"))
+    if args.teacher:
+        car = SCRIPTED_ME
+    else:
+        model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
+        car = model_car(ME, model.info.model_dump(mode="json"))
     if not isinstance(car.action_space, ContinuousActionSpace):
         parser.error("the model's action space is discrete: this compares continuous actions")
     columns = ["track", "rival", "steps behind", "teacher would pass",
                "steer off: passing", "steer off: following", "faster (m/s): passing",
-               "faster (m/s): following", "passed from behind", "overtakes/race",
-               "at-fault/race"]  # fmt: skip
+               "faster (m/s): following", "on its side: passing", "passes begun/race",
+               "passed from behind", "overtakes/race", "at-fault/race"]  # fmt: skip
+    subject = "the teacher" if args.teacher else args.model.name
     table = ResultTable(
-        f"{args.model.name} behind slower racers, the teacher riding along: "
+        f"{subject} behind slower racers, the teacher riding along: "
         f"{args.races} races per rival, {args.laps} laps",
         columns,
     )
     for track in args.tracks.split(","):
+        if args.teacher:
+            model = PassingPursuitPolicy(get_track(track), car.action_space)
         _, heats = field_on(track, model, car, args.laps, [], table.notes)
         teacher = PassingPursuitPolicy(get_track(track), car.action_space)
         for heat in [h for h in heats if h.name in SLOWER]:
@@ -133,6 +164,7 @@ def main() -> None:
                 track,
                 heat.name,
                 *agreement(shadowed.rows, car.action_space),
+                f"{shadowed.passes_begun / len(races):.1f}",
                 f"{passed}/{len(mine)}",
                 f"{sum(r.overtakes for r in mine) / len(mine):.2f}",
                 f"{sum(r.at_fault_collisions for r in mine) / len(mine):.2f}",

@@ -264,21 +264,35 @@ def test_passing_pursuit_passes_a_car_at_60_percent_of_its_pace_on_the_speedway(
         assert passer.finish_position == 1, seed
 
 
-def test_the_driver_says_when_a_pass_is_under_way() -> None:
+def test_the_driver_says_when_a_pass_is_under_way_and_on_which_side() -> None:
     """``is_passing`` (what ``benchmarks/teacher_agreement.py`` compares a model's actions
     with) is off while every car is followed from the start, on during the pass of a
-    pursuit driver at 60% of its pace on the speedway, and off again once past it."""
+    pursuit driver at 60% of its pace on the speedway, and off again once past it;
+    ``pass_side`` says the side of the rival the pass goes by, and ends the pass there."""
 
     class Recording(PassingPursuitPolicy):
         def act(self, observation, params=None):
             action = super().act(observation, params)
             seen.append(self.is_passing)
+            side = self.pass_side
+            if side is not None and params["objects_distance"]:
+                rival = params["objects_distance_from_center"][0]
+                rival *= 1.0 if params["objects_left_of_center"][0] else -1.0
+                here = params["distance_from_center"]
+                here *= 1.0 if params["is_left_of_center"] else -1.0
+                beside.append(side * (here - rival))
+            sides.append(side)
             return action
 
     seen: list[bool] = []
+    sides: list[float | None] = []
+    beside: list[float] = []
     _, passer = _duel(SPEEDWAY, _paced(0.6), laps=2, seed=0, passer=Recording)
     assert passer.overtakes >= 1
     assert not any(seen[:START_FOLLOW_STEPS]) and any(seen) and not seen[-1]
+    assert [side is not None for side in sides] == seen
+    assert {side for side in sides if side is not None} <= {1.0, -1.0}
+    assert beside[-1] > 0.2  # at the pass's last step, well out on that side of the rival
 
 
 def test_passing_pursuit_rarely_runs_into_a_car_held_after_leaving_the_road() -> None:
