@@ -497,7 +497,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         way = self._way_past(params, speed)
         if way is None:
             self._passing = None
-            off_line = abs(_offset(params) - self._line_offset_at(params["projection_distance"]))
+            off_line = abs(car_offset(params) - self._line_offset_at(params["projection_distance"]))
             slow = self._after_box and off_line > REJOIN_M
             self._after_box = slow
             return steer, min(speed, PASS_SPEED) if slow else speed
@@ -531,12 +531,13 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             self._seen = {i: _Seen() for i in range(count)}
             self._passing = None
         for i, seen in self._seen.items():
-            side = 1.0 if params["objects_left_of_center"][i] else -1.0
-            offset = side * float(params["objects_distance_from_center"][i])
             their_arc = float(params["objects_distance"][i])
             profile = self._profile_at(their_arc)
             seen.add(
-                float(params["objects_speed"][i]), offset, profile, self._line_offset_at(their_arc)
+                float(params["objects_speed"][i]),
+                object_offset(params, i),
+                profile,
+                self._line_offset_at(their_arc),
             )
 
     def _way_past(
@@ -552,7 +553,7 @@ class PassingPursuitPolicy(PurePursuitPolicy):
             self.track.arc_delta(arc, np.asarray(params["objects_distance"], dtype=float))
         )
         horizon = max(PASS_HORIZON_M, PASS_HORIZON_S * float(params["speed"]))
-        here = _offset(params)
+        here = car_offset(params)
         for i in np.argsort(gaps):
             if not -PASS_BESIDE_M <= gaps[i] <= horizon:
                 continue
@@ -754,6 +755,12 @@ class PassingPursuitPolicy(PurePursuitPolicy):
         return max(FOLLOW_MIN_SPEED, min(closing, braking))
 
 
-def _offset(params: dict[str, Any]) -> float:
+def car_offset(params: dict[str, Any]) -> float:
     """The car's signed lateral offset from the centre line (m, left positive)."""
     return (1.0 if params["is_left_of_center"] else -1.0) * float(params["distance_from_center"])
+
+
+def object_offset(params: dict[str, Any], i: int) -> float:
+    """Object ``i``'s signed lateral offset from the centre line (m, left positive)."""
+    side = 1.0 if params["objects_left_of_center"][i] else -1.0
+    return side * float(params["objects_distance_from_center"][i])

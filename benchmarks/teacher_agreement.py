@@ -41,6 +41,8 @@ from arena.pursuit import (
     PASS_HORIZON_S,
     START_FOLLOW_STEPS,
     PassingPursuitPolicy,
+    car_offset,
+    object_offset,
 )
 from league.jobs.evaluation import model_car
 from submissions import load_policy
@@ -83,20 +85,9 @@ class ShadowedModel:
             if 0.0 < gap <= horizon:
                 passing = float(self.teacher.is_passing)
                 side = self.teacher.pass_side or 0.0
-                on_side = float(side * (_offset(params) - _rival_offset(params)) > 0.0)
+                on_side = float(side * (car_offset(params) - object_offset(params, 0)) > 0.0)
                 self.rows.append((passing, *np.asarray(shadow), *np.asarray(action), on_side))
         return action
-
-
-def _offset(params: dict[str, Any]) -> float:
-    """The model car's lateral offset (m, left positive)."""
-    return (1.0 if params["is_left_of_center"] else -1.0) * float(params["distance_from_center"])
-
-
-def _rival_offset(params: dict[str, Any]) -> float:
-    """The rival's lateral offset (m, left positive)."""
-    left = params["objects_left_of_center"][0]
-    return (1.0 if left else -1.0) * float(params["objects_distance_from_center"][0])
 
 
 def agreement(rows: list[tuple[float, ...]], space: ContinuousActionSpace) -> list[str]:

@@ -18,6 +18,8 @@ from arena.pursuit import (
     PassingPursuitPolicy,
     PurePursuitPolicy,
     car_limits,
+    car_offset,
+    object_offset,
     racing_line_for,
 )
 from arena.race import run_race
@@ -276,11 +278,7 @@ def test_the_driver_says_when_a_pass_is_under_way_and_on_which_side() -> None:
             seen.append(self.is_passing)
             side = self.pass_side
             if side is not None and params["objects_distance"]:
-                rival = params["objects_distance_from_center"][0]
-                rival *= 1.0 if params["objects_left_of_center"][0] else -1.0
-                here = params["distance_from_center"]
-                here *= 1.0 if params["is_left_of_center"] else -1.0
-                beside.append(side * (here - rival))
+                beside.append(side * (car_offset(params) - object_offset(params, 0)))
             sides.append(side)
             return action
 
