@@ -24,11 +24,13 @@ lint: install
 	$(BIN)/ruff check .
 
 # The suite on every core (pytest-xdist), a test file per process: a file's tests share
-# its server and database. `make test TEST_WORKERS=0` runs it in one process.
+# its server and database. `make test TEST_WORKERS=0` runs it in one process. A worker that
+# crashes or hangs (see the timeouts in pyproject.toml) ends the run instead of being
+# replaced: a replacement would run the crashed test again.
 TEST_WORKERS ?= auto
 
 test: install lint
-	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --max-worker-restart 0
 
 # The quick benchmarks, each under about 30 s on a 2-core machine; each prints its table and
 # appends it to benchmarks/results/ (`make bench BENCH_ARGS=--no-record` only prints).
