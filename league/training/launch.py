@@ -6,7 +6,6 @@ and by trainers; the API process itself never runs a racer's code.
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import signal
 import subprocess
@@ -17,9 +16,9 @@ from league.settings import Settings
 from league.training.sandbox import (
     ConfinementLimits,
     SandboxUnavailable,
-    apply_limits,
     confined_popen,
     kill_confined,
+    limited,
     probe,
 )
 
@@ -65,12 +64,11 @@ def start_child(
     if not settings.training_unconfined:
         raise SandboxUnavailable(training_refused(settings) or "no sandbox")
     return subprocess.Popen(
-        argv,
+        limited(argv, limits),
         cwd=workdir,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         start_new_session=True,
-        preexec_fn=functools.partial(apply_limits, limits),
     )
 
 

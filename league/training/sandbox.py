@@ -27,11 +27,9 @@ sandboxes running at the same time share it.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import functools
 import importlib.util
 import os
-import resource
 import shutil
 import signal
 import subprocess
@@ -62,6 +60,25 @@ _DROP = (
 )
 """Launcher run inside a root-started sandbox: drop to the sandbox uid, enter the workdir
 (root without capabilities may not: it is the sandbox uid's), exec the command."""
+
+_LIMIT = f"""
+import ctypes, os, resource as r, signal, sys
+names = (r.RLIMIT_AS, r.RLIMIT_CPU, r.RLIMIT_NPROC, r.RLIMIT_FSIZE, r.RLIMIT_NOFILE, r.RLIMIT_CORE)
+for name, value in zip(names, sys.argv[1:7]):
+    r.setrlimit(name, (int(value), int(value)))
+try:
+    ctypes.CDLL(None).prctl({_PR_SET_PDEATHSIG}, signal.SIGKILL)
+except (OSError, AttributeError):  # not Linux: no death with the parent
+    pass
+if sys.argv[7]:  # the caller's LC_CTYPE, which Python's locale coercion may have changed
+    os.environ["LC_CTYPE"] = sys.argv[7]
+else:
+    os.environ.pop("LC_CTYPE", None)
+os.execvp(sys.argv[8], sys.argv[8:])
+"""
+"""Launcher of :func:`limited`: address space, CPU seconds, processes, file size, open
+files and core size from its arguments, killed when its parent dies, then the command in
+the caller's environment."""
 
 
 @dataclass(frozen=True)
@@ -212,20 +229,28 @@ def _bwrap_argv(
     return [*args, "--chdir", str(workdir), "--", *argv]
 
 
-def apply_limits(limits: ConfinementLimits) -> None:
-    """``preexec_fn`` of bwrap (or of an unconfined child): the rlimits, inherited by all
-    it starts, and death with the parent."""
-    for which, value in (
-        (resource.RLIMIT_AS, limits.memory_mb * MiB),
-        (resource.RLIMIT_CPU, limits.cpu_seconds),
-        (resource.RLIMIT_NPROC, limits.processes),
-        (resource.RLIMIT_FSIZE, limits.file_mb * MiB),
-        (resource.RLIMIT_NOFILE, limits.open_files),
-        (resource.RLIMIT_CORE, 0),
-    ):
-        resource.setrlimit(which, (value, value))
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+def limited(
+    argv: Sequence[str], limits: ConfinementLimits, env: dict[str, str] | None = None
+) -> list[str]:
+    """``argv`` behind a tiny launcher that sets the rlimits (inherited by all it starts) and
+    death with the parent, then execs it with ``env`` (the caller's, by default) unchanged.
+
+    Not a ``preexec_fn``: that makes Python fork the whole threaded caller and run Python in
+    the child, and the fork waits in the handlers libraries register for it. OpenBLAS's
+    deadlocked a league server whose other thread was in a numpy solve (a race line for
+    the garage's catalogue). Without one, the child is spawned with ``vfork`` and runs no
+    code of the caller's.
+    """
+    values = (
+        limits.memory_mb * MiB,
+        limits.cpu_seconds,
+        limits.processes,
+        limits.file_mb * MiB,
+        limits.open_files,
+        0,
+    )
+    locale = (os.environ if env is None else env).get("LC_CTYPE", "")
+    return [sys.executable, "-I", "-S", "-c", _LIMIT, *map(str, values), locale, *argv]
 
 
 def _give_to(workdir: Path, uid: int) -> None:
@@ -255,7 +280,11 @@ def _start(
     if os.geteuid() == 0 and uid != 0:
         _give_to(workdir, uid)
     return subprocess.Popen(
-        _bwrap_argv(argv, workdir, limits, env, [Path(p) for p in extra_readable], uid),
+        limited(
+            _bwrap_argv(argv, workdir, limits, env, [Path(p) for p in extra_readable], uid),
+            limits,
+            BWRAP_ENV,
+        ),
         stdin=subprocess.DEVNULL,
         stdout=stdout,
         stderr=stderr,
@@ -263,7 +292,6 @@ def _start(
         cwd="/",
         close_fds=True,
         start_new_session=True,
-        preexec_fn=functools.partial(apply_limits, limits),
     )
 
 

@@ -401,3 +401,21 @@ time.sleep(1000)
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
     kill_confined(proc)  # again: a no-op
+
+
+_FORKS: list[int] = []
+_COUNTING = [False]
+os.register_at_fork(before=lambda: _COUNTING[0] and _FORKS.append(1))
+
+
+def test_starting_a_sandbox_runs_no_fork_handler_in_the_caller(workdir: Path) -> None:
+    """The sandbox is spawned, not forked from the caller with a ``preexec_fn``: such a
+    fork runs every library's fork handler in the threaded league server, and OpenBLAS's
+    deadlocked it while another thread was in a numpy solve."""
+    _COUNTING[0] = True
+    try:
+        code, output = run("print('ran')", workdir)
+    finally:
+        _COUNTING[0] = False
+    assert (code, output.strip()) == (0, "ran")
+    assert _FORKS == []
