@@ -209,11 +209,13 @@ def test_ctrl_c_with_workers_saves_packs_and_stops_every_worker(tmp_path):
     env = {**os.environ, "COLUMNS": "200", "PYTHONFAULTHANDLER": "1"}
     # A session of its own: the process group a terminal's Ctrl-C signals. SIGINT as a
     # terminal leaves it: a shell's background job (`make test &`) ignores SIGINT, and an
-    # ignored signal stays ignored in its children.
+    # ignored signal stays ignored in its children. (A launcher, not a preexec_fn: that
+    # forks this threaded process, see tests/league/test_training_sandbox.py.)
+    restore = "import os, signal, sys\nsignal.signal(signal.SIGINT, signal.SIG_DFL)\n"
+    restore += "os.execv(sys.argv[1], sys.argv[1:])"
     proc = subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        start_new_session=True, env=env,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        [sys.executable, "-c", restore, *command], stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, start_new_session=True, env=env,
     )  # fmt: skip
     try:
         metrics = run / "metrics.csv"

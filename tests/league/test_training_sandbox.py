@@ -261,10 +261,8 @@ def test_fork_bomb_is_stopped(workdir: Path) -> None:
     assert forked < 200, output
     assert "BlockingIOError" in output, output  # EAGAIN: the limit, not the cap, stopped it
     assert time.monotonic() - started < 15  # its sleeping children died with it
-    pid = os.fork()  # the host still can
-    if pid == 0:
-        os._exit(7)
-    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 7
+    # the host still can (spawned, not forked: see the fork-handler test below)
+    assert subprocess.run([sys.executable, "-c", "raise SystemExit(7)"]).returncode == 7
 
 
 def test_memory_limit(workdir: Path) -> None:
@@ -419,3 +417,45 @@ def test_starting_a_sandbox_runs_no_fork_handler_in_the_caller(workdir: Path) ->
         _COUNTING[0] = False
     assert (code, output.strip()) == (0, "ran")
     assert _FORKS == []
+
+
+WEDGE = """
+import sys, tempfile, threading, time
+from pathlib import Path
+from league.training.sandbox import ConfinementLimits, confined_popen, kill_confined
+from tracks.catalog import builtin_names, get_track
+from tracks.raceline import compute_racing_line
+counts, stop = {"lines": 0, "sandboxes": 0}, time.monotonic() + float(sys.argv[1])
+def lines():
+    while time.monotonic() < stop:
+        for name in builtin_names():
+            compute_racing_line(get_track(name))
+            counts["lines"] += 1
+def sandboxes():
+    workdir = Path(tempfile.mkdtemp())
+    while time.monotonic() < stop:
+        proc = confined_popen(["/bin/true"], workdir, ConfinementLimits())
+        proc.communicate()
+        kill_confined(proc)
+        counts["sandboxes"] += 1
+threads = [threading.Thread(target=f) for f in (lines, lines, sandboxes, sandboxes)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+print(counts["lines"], counts["sandboxes"])
+"""
+
+
+@pytest.mark.slow
+def test_sandboxes_started_beside_numpy_work_do_not_wedge_the_process() -> None:
+    """What a league server does when a reward check starts while the garage's catalogue
+    computes its racing lines: with the rlimits set in a ``preexec_fn``, the racing lines
+    stopped for good within a second (OpenBLAS's fork handler deadlocked)."""
+    result = subprocess.run(
+        [sys.executable, "-c", WEDGE, "8"], capture_output=True, text=True, timeout=60,
+        cwd=PROJECT,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    lines, sandboxes = map(int, result.stdout.split())
+    assert lines >= 10 and sandboxes >= 10, result.stdout
