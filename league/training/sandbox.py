@@ -233,7 +233,8 @@ def limited(
     argv: Sequence[str], limits: ConfinementLimits, env: dict[str, str] | None = None
 ) -> list[str]:
     """``argv`` behind a tiny launcher that sets the rlimits (inherited by all it starts) and
-    death with the parent, then execs it with ``env`` (the caller's, by default) unchanged.
+    death with the parent, then execs it. ``env`` is the environment the launcher is started
+    with (by default the caller's), which the command gets unchanged.
 
     Not a ``preexec_fn``: that makes Python fork the whole threaded caller and run Python in
     the child, and the fork waits in the handlers libraries register for it. OpenBLAS's
