@@ -420,7 +420,7 @@ def test_starting_a_sandbox_runs_no_fork_handler_in_the_caller(workdir: Path) ->
 
 
 WEDGE = """
-import sys, tempfile, threading, time
+import sys, threading, time
 from pathlib import Path
 from league.training.sandbox import ConfinementLimits, confined_popen, kill_confined
 from tracks.catalog import builtin_names, get_track
@@ -432,7 +432,7 @@ def lines():
             compute_racing_line(get_track(name))
             counts["lines"] += 1
 def sandboxes():
-    workdir = Path(tempfile.mkdtemp())
+    workdir = Path(sys.argv[2])
     while time.monotonic() < stop:
         proc = confined_popen(["/bin/true"], workdir, ConfinementLimits())
         proc.communicate()
@@ -448,13 +448,13 @@ print(counts["lines"], counts["sandboxes"])
 
 
 @pytest.mark.slow
-def test_sandboxes_started_beside_numpy_work_do_not_wedge_the_process() -> None:
+def test_sandboxes_started_beside_numpy_work_do_not_wedge_the_process(workdir: Path) -> None:
     """What a league server does when a reward check starts while the garage's catalogue
     computes its racing lines: with the rlimits set in a ``preexec_fn``, the racing lines
     stopped for good within a second (OpenBLAS's fork handler deadlocked)."""
     result = subprocess.run(
-        [sys.executable, "-c", WEDGE, "8"], capture_output=True, text=True, timeout=60,
-        cwd=PROJECT,
+        [sys.executable, "-c", WEDGE, "8", str(workdir)], capture_output=True, text=True,
+        timeout=60, cwd=PROJECT,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     lines, sandboxes = map(int, result.stdout.split())
