@@ -451,11 +451,13 @@ print(counts["lines"], counts["sandboxes"])
 def test_sandboxes_started_beside_numpy_work_do_not_wedge_the_process(workdir: Path) -> None:
     """What a league server does when a reward check starts while the garage's catalogue
     computes its racing lines: with the rlimits set in a ``preexec_fn``, the racing lines
-    stopped for good within a second (OpenBLAS's fork handler deadlocked)."""
+    stopped for good within a second (OpenBLAS's fork handler deadlocked), so the child never
+    finished and ran into the timeout. The counts only show that both kinds of work ran; how
+    many racing lines fit in 8 s depends on how busy the machine is (8 on a loaded CI run)."""
     result = subprocess.run(
         [sys.executable, "-c", WEDGE, "8", str(workdir)], capture_output=True, text=True,
         timeout=60, cwd=PROJECT,
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     lines, sandboxes = map(int, result.stdout.split())
-    assert lines >= 10 and sandboxes >= 10, result.stdout
+    assert lines >= 2 and sandboxes >= 2, result.stdout
