@@ -112,8 +112,8 @@ RECIPES: dict[str, Recipe] = {
         Recipe(
             name="head_to_model",
             summary="slipstream_speedway (DeepRacer's width, room to pass); needs --clone of a "
-            "time_trial run; races a pool of its own snapshots and that run's model, "
-            "imitating the passing pursuit driver",
+            "time_trial run; races a pool of its own snapshots, pursuit racers at 60-75% of "
+            "its pace and that run's model, imitating the passing pursuit driver",
             options={
                 "race_type": "head_to_model",
                 "track": "slipstream_speedway",  # beginner_loop (0.76 m) leaves no room to pass
@@ -122,6 +122,9 @@ RECIPES: dict[str, Recipe] = {
                 "reward_fn": "head_to_head",
                 "teacher": "pursuit",
                 "selfplay": "pool",
+                # racers the teacher passes, so more of its labels behind a car are passes
+                # (benchmarks/RESULTS.md, "Slower paced racers in the imitation pool")
+                "paced_rivals": "0.6,0.65,0.7,0.75",
                 **_RACE_TYPE_EVALS,
             },
             hyperparameters=TWO_FRAMES,  # the parent's: a clone needs its network

@@ -76,6 +76,11 @@ def test_head_to_model_needs_a_parent_run_and_races_its_model(tmp_path):
     settings = cli._settings(tmp_path / "r", "head_to_model", parent, False, {"minutes": 1.0})
     assert settings.opponent == (str((parent / "model" / "model.zip").resolve()),)
     assert settings.selfplay == "pool"
+    # paced racers the teacher passes, unless the user names others
+    assert settings.paced_rivals == (0.6, 0.65, 0.7, 0.75)
+    given = {"minutes": 1.0, "paced_rivals": "0.8,1"}
+    settings = cli._settings(tmp_path / "r", "head_to_model", parent, False, given)
+    assert settings.paced_rivals == (0.8, 1.0)
 
 
 def test_ppo_after_head_to_model_imitation_is_anchored_and_races_the_imitation_model(tmp_path):
