@@ -7,11 +7,13 @@ import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
+import numpy  # noqa: F401  loaded before threadpool_limits, which limits loaded libraries only
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from threadpoolctl import threadpool_limits
 
 from league.db import make_engine, make_session_factory
 from league.http.bodylimit import BodyLimitMiddleware, BodyRule
@@ -119,7 +121,15 @@ def _install_middleware(app: FastAPI, settings: Settings) -> None:
 
 @asynccontextmanager
 async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
-    """At start, sweep the file store of crash leftovers and unreferenced files."""
+    """At start, hold numpy's BLAS to one thread and sweep the file store of crash
+    leftovers and unreferenced files.
+
+    The server's BLAS work is small (a racing line for the garage's catalogue is a few
+    hundred unknowns) and one thread does it as fast. Threaded, it waits on its own
+    threads: on a host busy with training jobs the catalogue took 30-50 s instead of 1
+    (``benchmarks/RESULTS.md``, "A loaded host and the catalogue").
+    """
+    threadpool_limits(1, user_api="blas")
     state = app.state
     try:
         sweep(state.session_factory, state.storage, state.settings.orphan_grace_seconds)

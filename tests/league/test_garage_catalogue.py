@@ -106,3 +106,15 @@ def test_only_an_ended_job_is_deleted_and_only_by_its_owner(league: League) -> N
         assert session.get(TrainingJob, running) is not None
         left = session.query(TrainingEvent).filter_by(job_id=ended).count()
     assert left == 0
+
+
+def test_the_server_does_its_blas_work_on_one_thread(league: League) -> None:
+    """A racing line for the catalogue waits on threaded BLAS when training jobs load the
+    host (30-50 s instead of 1, benchmarks/RESULTS.md): the running server holds every
+    BLAS library its process has loaded to one thread."""
+    from threadpoolctl import threadpool_info
+
+    with league.client() as anyone:
+        assert anyone.get("/api/garage/catalogue").status_code == 200
+    blas = [info for info in threadpool_info() if info["user_api"] == "blas"]
+    assert blas and all(info["num_threads"] == 1 for info in blas)
