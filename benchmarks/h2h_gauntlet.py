@@ -263,6 +263,7 @@ def main() -> None:
         "ll" + "r" * 7,
     )
     slower: list[RaceResult] = []
+    slower_names = {paced_name(p) for p in SLOWER}
     with Progress() as progress:
         for track in args.tracks.split(","):
             resolve_track(RaceConfig.build(track=track, cars=[car]))  # unknown names fail here
@@ -277,7 +278,7 @@ def main() -> None:
                     results.append(race_heat(model, car, heat, track, args.laps, k))
                     progress.advance(task)
                 table.add_row(track, heat.name, *row(results, solo, args.laps, road))
-                if heat.name in {paced_name(p) for p in SLOWER}:
+                if heat.name in slower_names:
                     slower += results
     table.notes.append(target_note(slower))
     write(table, args.record)

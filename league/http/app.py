@@ -126,8 +126,8 @@ async def _lifespan(app: FastAPI) -> AsyncIterator[None]:
 
     The server's BLAS work is small (a racing line for the garage's catalogue is a few
     hundred unknowns) and one thread does it as fast. Threaded, it waits on its own
-    threads: on a host busy with training jobs the catalogue took 30-50 s instead of 1
-    (``benchmarks/RESULTS.md``, "A loaded host and the catalogue").
+    threads: on a 2-core host kept busy the catalogue's first build took 50-107 s instead
+    of 2-4 (``benchmarks/RESULTS.md``, "A loaded host and the catalogue").
     """
     threadpool_limits(1, user_api="blas")
     state = app.state

@@ -4,6 +4,7 @@ it shows, and deleting an ended training job, against a real server."""
 from __future__ import annotations
 
 import pytest
+from threadpoolctl import threadpool_info
 
 from agents.action_spaces import parse_action_space_spec
 from agents.options import settings_from_options
@@ -110,10 +111,8 @@ def test_only_an_ended_job_is_deleted_and_only_by_its_owner(league: League) -> N
 
 def test_the_server_does_its_blas_work_on_one_thread(league: League) -> None:
     """A racing line for the catalogue waits on threaded BLAS when training jobs load the
-    host (30-50 s instead of 1, benchmarks/RESULTS.md): the running server holds every
+    host (50-107 s instead of 2-4, benchmarks/RESULTS.md): the running server holds every
     BLAS library its process has loaded to one thread."""
-    from threadpoolctl import threadpool_info
-
     with league.client() as anyone:
         assert anyone.get("/api/garage/catalogue").status_code == 200
     blas = [info for info in threadpool_info() if info["user_api"] == "blas"]
