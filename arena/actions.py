@@ -64,7 +64,10 @@ class DiscreteActionSpace(_Frozen):
 
     def to_command(self, action: Any) -> tuple[float, float]:
         """Map a policy action (an index) to ``(steering_deg, speed_mps)``."""
-        index = int(np.asarray(action).reshape(-1)[0])
+        if isinstance(action, int | np.integer):
+            index = int(action)
+        else:
+            index = int(np.asarray(action).reshape(-1)[0])
         if not 0 <= index < self.n:
             raise ValueError(f"action index {index} outside 0..{self.n - 1}")
         chosen = self.actions[index]

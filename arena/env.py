@@ -691,7 +691,7 @@ class RacingEnv(ParallelEnv):
             owners.append(owner)
             names.append(name)
             bodies.append(car.body_id)
-            locations.append(tuple(snap.model_point))
+            locations.append(snap.model_point)
             headings.append(math.degrees(state.yaw))
             speeds.append(abs(state.speed))
             cx, cy = snap.centre

@@ -66,7 +66,10 @@ class Projection:
 
     def rows(self, index: list[int] | np.ndarray) -> Projection:
         """The projections of the points at ``index``, in that order."""
-        return Projection(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+        return Projection(*(getattr(self, name)[index] for name in _PROJECTION_FIELDS))
+
+
+_PROJECTION_FIELDS = tuple(f.name for f in fields(Projection))
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
@@ -190,9 +193,9 @@ class Track:
         )
 
     # --------------------------------------------------------------- properties
-    @property
+    @cached_property
     def length(self) -> float:
-        """Centre-line length in metres."""
+        """Centre-line length in metres (read every step for every car: computed once)."""
         return float(self._cum[-1])
 
     @property
@@ -291,6 +294,12 @@ class Track:
         be, in ``[-length / 2, length / 2)``; on an open track it is ``end - start``.
         Vectorised: arrays broadcast and give an array; two scalars give a float.
         """
+        if type(start) is float and type(end) is float:  # the rules' per-car case, without numpy
+            delta = end - start
+            if self.is_loop:
+                half = 0.5 * self.length
+                delta = (delta + half) % self.length - half
+            return delta
         delta = np.subtract(end, start, dtype=float)
         if self.is_loop:
             half = 0.5 * self.length
