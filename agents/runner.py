@@ -36,6 +36,7 @@ from rsl_rl.runners import OnPolicyRunner
 from rsl_rl.utils import check_nan
 from tensordict import TensorDict
 
+from agents.learner_threads import LearnerThreads
 from agents.networks import channels_last, images_pooled_once
 
 # Largest weight of a sample's advantage, pi_prox / mu, in an overlapped update: a bound
@@ -70,11 +71,12 @@ def thread_counts(threads: int | None, workers: int, cores: int | None = None) -
 @dataclass(frozen=True)
 class IterationTimings:
     """Seconds of one iteration: its wall time, collecting and updating (which overlap
-    unless the runner is synchronous)."""
+    unless the runner is synchronous); the torch threads the update ran on."""
 
     wall: float = 0.0
     collect: float = 0.0
     update: float = 0.0
+    update_threads: int = 0
 
 
 class Behaviour:
@@ -167,6 +169,11 @@ class RacingRunner(OnPolicyRunner):
             self._behaviour = Behaviour(self.alg)
         else:
             self.threads = thread_counts(threads, workers)
+        # Auto threads step down to one while other processes crowd the cores (in turn only:
+        # overlapped, the process's CPU time mixes collection into the update's).
+        self.learner_threads = (
+            LearnerThreads(self.threads[1]) if threads is None and not self.overlapped else None
+        )
         self._pending = False  # the learner's storage holds a rollout not yet learned from
 
     def start(self) -> None:
@@ -204,13 +211,20 @@ class RacingRunner(OnPolicyRunner):
     def _sync_iteration(self, it: int) -> dict[str, float]:
         """Collect with the current policy, then update on that rollout."""
         started = time.monotonic()
-        torch.set_num_threads(self.threads[0])
+        learner = self.learner_threads
+        update_threads = self.threads[1] if learner is None else learner.now
+        torch.set_num_threads(min(self.threads[0], update_threads))
         self._collect_rollout(it, self.alg)
         collected = time.monotonic()
-        torch.set_num_threads(self.threads[1])
+        torch.set_num_threads(update_threads)
+        cpu = time.process_time()
         losses = self._update()
         done = time.monotonic()
-        self.timings = IterationTimings(done - started, collected - started, done - collected)
+        if learner is not None:
+            learner.measured(done - collected, time.process_time() - cpu)
+        self.timings = IterationTimings(
+            done - started, collected - started, done - collected, update_threads
+        )
         return losses
 
     def _overlapped_iteration(self, it: int) -> dict[str, float]:
@@ -231,7 +245,9 @@ class RacingRunner(OnPolicyRunner):
         self._behaviour.swap_storage(self.alg)
         self._pending = True
         done = time.monotonic()
-        self.timings = IterationTimings(done - started, collected - started, update_s)
+        self.timings = IterationTimings(
+            done - started, collected - started, update_s, self.threads[1]
+        )
         return losses
 
     def _collect_behind(self, it: int) -> None:
@@ -325,5 +341,8 @@ class RacingRunner(OnPolicyRunner):
                 action_std=self.alg.get_policy().output_std,
                 rnd_weight=None,
             )
-        if self.overlapped and getattr(self.logger, "writer", None) is not None:
-            self.logger.writer.add_scalar("Policy/behaviour_weight_spread", self.staleness, it)
+        writer = getattr(self.logger, "writer", None)
+        if self.overlapped and writer is not None:
+            writer.add_scalar("Policy/behaviour_weight_spread", self.staleness, it)
+        if self.learner_threads is not None and writer is not None:
+            writer.add_scalar("Perf/update_threads", self.timings.update_threads, it)

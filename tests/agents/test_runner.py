@@ -188,6 +188,24 @@ def test_the_runner_collects_and_updates_with_its_thread_counts(monkeypatch) -> 
     assert _update_threads(runner, monkeypatch) == [2, 2] and env.threads == {1}
 
 
+def test_an_update_starved_of_cpu_time_sends_the_next_ones_to_one_thread(monkeypatch) -> None:
+    env = _ThreadsSeen()
+    monkeypatch.setattr("agents.runner.thread_counts", lambda threads, workers: (2, 2))
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=None, sync=True)
+    real_update = runner.alg.update
+    # The update waits without running, as when other processes hold the cores.
+    monkeypatch.setattr(runner.alg, "update", lambda: time.sleep(0.1) or real_update())
+    assert _update_threads(runner, monkeypatch) == [2, 1] and env.threads == {2, 1}
+
+
+def test_an_explicit_thread_count_is_kept_however_starved(monkeypatch) -> None:
+    env = _ThreadsSeen()
+    runner = RacingRunner(env, _cfg(), log_dir=None, device="cpu", threads=2, sync=True)
+    real_update = runner.alg.update
+    monkeypatch.setattr(runner.alg, "update", lambda: time.sleep(0.1) or real_update())
+    assert _update_threads(runner, monkeypatch) == [2, 2] and runner.learner_threads is None
+
+
 def test_overlapped_collection_and_update_share_the_cores_the_workers_leave(monkeypatch):
     env = _ThreadsSeen()
     env.num_workers = 2
