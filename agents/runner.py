@@ -136,8 +136,10 @@ class RacingRunner(OnPolicyRunner):
 
     Writes no checkpoint files (``agents.train`` does) and prints nothing; TensorBoard
     events go to ``log_dir`` as with rsl-rl's runner. ``threads``: torch CPU threads, as
-    :func:`thread_counts` reads it (``None``: auto). ``sync``: collect, then update, as
-    rsl-rl does; otherwise (PPO only) the update overlaps the next rollout (module docstring).
+    :func:`thread_counts` reads it (``None``: auto, which in turn on a CPU drops to one
+    while other processes crowd the cores, :mod:`agents.learner_threads`). ``sync``:
+    collect, then update, as rsl-rl does; otherwise (PPO only) the update overlaps the next
+    rollout (module docstring).
     """
 
     def __init__(
@@ -169,11 +171,11 @@ class RacingRunner(OnPolicyRunner):
             self._behaviour = Behaviour(self.alg)
         else:
             self.threads = thread_counts(threads, workers)
-        # Auto threads step down to one while other processes crowd the cores (in turn only:
-        # overlapped, the process's CPU time mixes collection into the update's).
-        self.learner_threads = (
-            LearnerThreads(self.threads[1]) if threads is None and not self.overlapped else None
-        )
+        # Auto threads step down to one while other processes crowd the cores: in turn on a
+        # CPU only (overlapped, the process's CPU time mixes collection into the update's;
+        # on a GPU the update waits for the device, not for cores).
+        adaptive = threads is None and not self.overlapped and not self.device.startswith("cuda")
+        self.learner_threads = LearnerThreads(self.threads[1]) if adaptive else None
         self._pending = False  # the learner's storage holds a rollout not yet learned from
 
     def start(self) -> None:
