@@ -21,13 +21,7 @@ import time
 from pathlib import Path
 
 import httpx
-from harness import ROOT, ResultTable, add_record_option, start_league, summary, write
-
-
-def spin() -> None:
-    """Keep one core busy until killed."""
-    while True:
-        pass
+from harness import ROOT, ResultTable, add_record_option, spin, start_league, summary, write
 
 
 def first_catalogue_seconds(tree: Path, hogs: int) -> float:

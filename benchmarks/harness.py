@@ -77,6 +77,12 @@ class LeagueServer:
         self.stop()
 
 
+def spin() -> None:
+    """Keep one core busy until killed (a load generator's process)."""
+    while True:
+        pass
+
+
 def rss_kib(pid: int) -> int:
     """Resident memory of process ``pid`` in KiB, from ``/proc`` (0 once it is gone)."""
     resident = _proc_field(f"/proc/{pid}/status", "VmRSS")  # "123456 kB"

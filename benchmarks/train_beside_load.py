@@ -24,16 +24,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from harness import ROOT, ResultTable, add_record_option, write
+from harness import ROOT, ResultTable, add_record_option, spin, write
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 SKIP = 4
-
-
-def spin() -> None:
-    """Keep one core busy until killed."""
-    while True:
-        pass
 
 
 def train_command(out: Path, seed: int, iterations: int, threads: int | None) -> list[str]:
