@@ -5,9 +5,9 @@ Each row runs ``slipstream train --recipe time_trial --track slipstream_speedway
 --iterations N`` (camera, 2 env workers, the learner's auto threads unless ``--threads``)
 from ``--tree`` and reads its ``metrics.csv`` and TensorBoard events: seconds an iteration
 after the first ``SKIP`` (the start and first evaluations), seconds an update, and the
-torch threads the updates ran on. "beside a training" starts a second copy of the same
-command (another seed and folder) at the same moment and reports the first; "beside N
-spinning" starts N processes that keep a core busy each.
+torch threads the updates ran on. Row "training" starts a second copy of the same command
+(another seed and folder) at the same moment and reports the first; row "spinN" starts N
+processes that keep a core busy each.
 
     .venv/bin/python benchmarks/train_beside_load.py --beside none,training,spin2
 """
@@ -38,7 +38,7 @@ def train_command(out: Path, seed: int, iterations: int, threads: int | None) ->
     return command + ([] if threads is None else ["--threads", str(threads)])
 
 
-def read_run(out: Path) -> dict[str, float]:
+def read_run(out: Path) -> dict[str, float | str]:
     """Seconds an iteration and an update after the first ``SKIP``; the update threads."""
     with (out / "metrics.csv").open() as f:
         elapsed = [float(row["elapsed_s"]) for row in csv.DictReader(f)]
@@ -58,7 +58,9 @@ def read_run(out: Path) -> dict[str, float]:
     }
 
 
-def measure(tree: Path, beside: str, iterations: int, threads: int | None) -> dict[str, float]:
+def measure(
+    tree: Path, beside: str, iterations: int, threads: int | None
+) -> dict[str, float | str]:
     """Run the measured training with ``beside`` (none, training or spinN) and read it."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     with tempfile.TemporaryDirectory(prefix="train-load-") as tmp:
