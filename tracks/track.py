@@ -294,16 +294,14 @@ class Track:
         be, in ``[-length / 2, length / 2)``; on an open track it is ``end - start``.
         Vectorised: arrays broadcast and give an array; two scalars give a float.
         """
-        if type(start) is float and type(end) is float:  # the rules' per-car case, without numpy
-            delta = end - start
-            if self.is_loop:
-                half = 0.5 * self.length
-                delta = (delta + half) % self.length - half
-            return delta
-        delta = np.subtract(end, start, dtype=float)
+        # Two floats (the rules' per-car case) stay Python floats: no numpy call per car.
+        scalars = type(start) is float and type(end) is float
+        delta = end - start if scalars else np.subtract(end, start, dtype=float)
         if self.is_loop:
             half = 0.5 * self.length
-            delta = np.mod(delta + half, self.length) - half
+            delta = (delta + half) % self.length - half  # np.mod on arrays
+        if scalars:
+            return delta
         return float(delta) if delta.ndim == 0 else delta
 
     def _locate(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
