@@ -61,7 +61,9 @@ ME, RIVAL = "model", "rival"
 # from the grid, 2 s: the teacher's START_FOLLOW_STEPS).
 START_S = 2.0
 CONTACT_KINDS = ("start", "rear", "side")
-SCRIPTED_ME = CarConfig(name=ME, action_space=ContinuousActionSpace())
+SCRIPTED_SPACE = ContinuousActionSpace()
+"""The scripted drivers' action space (0.5-4 m/s): the paced racers' and the teacher's."""
+SCRIPTED_ME = CarConfig(name=ME, action_space=SCRIPTED_SPACE)
 
 
 @dataclass
@@ -116,7 +118,7 @@ def rivals(track_name: str, pace: float, rival_pace: float, models: list[Heat]) 
     """The field on one track: the paced pursuit drivers (``rival_pace``: the pursuit
     driver's own, m/s), the other models, the teacher."""
     track = get_track(track_name)
-    scripted = CarConfig(name=RIVAL, action_space=ContinuousActionSpace())  # 0.5-4 m/s
+    scripted = CarConfig(name=RIVAL, action_space=SCRIPTED_SPACE)
     space = scripted.action_space
     heats = [
         Heat(
@@ -144,7 +146,8 @@ def field_on(
         if solo
         else f"{track}: the model did not finish alone; rivals paced at 1 m/s"
     )
-    rival_lap = solo_lap(PurePursuitPolicy(road, car.action_space), SCRIPTED_ME, track, laps)
+    # the pursuit driver's own pace, in the paced racers' car (whatever the model's space)
+    rival_lap = solo_lap(PurePursuitPolicy(road, SCRIPTED_SPACE), SCRIPTED_ME, track, laps)
     rival_pace = road.length / rival_lap if rival_lap else pace
     if rival_lap:
         notes.append(f"{track}: the pursuit driver alone {rival_lap:.2f} s a lap")
