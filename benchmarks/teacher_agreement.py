@@ -9,8 +9,8 @@ start's 2 s on (the teacher follows every car before that), over the steps with 
 ahead within the teacher's planning horizon:
 
 - how often the teacher would be passing from the states the model reaches;
-- how far the model's steering is from the teacher's (normalised action, 0-2) when the
-  teacher would pass and when it would follow;
+- how far the model's steering is from the teacher's (in units of the largest steering
+  angle, so 0-2) when the teacher would pass and when it would follow;
 - how much faster than the teacher's command the model drives (m/s) in each;
 - how often a race the teacher would begin a pass (a model that hesitates makes it begin,
   give up and begin again), and in how many of the steps it would be passing the model
@@ -35,7 +35,7 @@ import numpy as np
 from h2h_gauntlet import ME, PACES, SAMPLES, SCRIPTED_ME, field_on, paced_name, race_heat
 from harness import ResultTable, add_record_option, write
 
-from arena.actions import ContinuousActionSpace
+from arena.actions import MAX_STEERING_DEG
 from arena.pursuit import (
     PASS_HORIZON_M,
     PASS_HORIZON_S,
@@ -53,8 +53,9 @@ SLOWER = tuple(paced_name(p) for p in PACES if p < 1.0)  # the heats of slower r
 
 class ShadowedModel:
     """The model's policy, with the teacher reading the same params each step; records
-    ``(teacher passing, teacher action, model action, model car on the teacher's pass
-    side)`` with the rival ahead in range, and counts the passes the teacher begins."""
+    ``(teacher passing, teacher command, model command, model car on the teacher's pass
+    side)`` with the rival ahead in range (a command: steering degrees and speed, in
+    either kind of action space), and counts the passes the teacher begins."""
 
     needs_params = True
 
@@ -86,16 +87,18 @@ class ShadowedModel:
                 passing = float(self.teacher.is_passing)
                 side = self.teacher.pass_side or 0.0
                 on_side = float(side * (car_offset(params) - object_offset(params, 0)) > 0.0)
-                self.rows.append((passing, *np.asarray(shadow), *np.asarray(action), on_side))
+                space = self.teacher.space
+                commands = (*space.to_command(shadow), *space.to_command(action))
+                self.rows.append((passing, *commands, on_side))
         return action
 
 
-def agreement(rows: list[tuple[float, ...]], space: ContinuousActionSpace) -> list[str]:
+def agreement(rows: list[tuple[float, ...]]) -> list[str]:
     """The table's cells of agreement for one heat's recorded steps."""
     d = np.array(rows).reshape(-1, 6)
     passing = d[:, 0] == 1.0
-    steer = np.abs(d[:, 3] - d[:, 1])
-    faster = (d[:, 4] - d[:, 2]) * (space.speed.high - space.speed.low) / 2.0
+    steer = np.abs(d[:, 3] - d[:, 1]) / MAX_STEERING_DEG
+    faster = d[:, 4] - d[:, 2]
 
     def mean(values: np.ndarray, where: np.ndarray, fmt: str) -> str:
         return format(values[where].mean(), fmt) if where.any() else "-"
@@ -126,8 +129,6 @@ def main() -> None:
     else:
         model = load_policy(args.model, non_finite="raise", name=f"car {ME}")
         car = model_car(ME, model.info.model_dump(mode="json"))
-    if not isinstance(car.action_space, ContinuousActionSpace):
-        parser.error("the model's action space is discrete: this compares continuous actions")
     columns = ["track", "rival", "steps behind", "teacher would pass",
                "steer off: passing", "steer off: following", "faster (m/s): passing",
                "faster (m/s): following", "on its side: passing", "passes begun/race",
@@ -154,7 +155,7 @@ def main() -> None:
             table.add_row(
                 track,
                 heat.name,
-                *agreement(shadowed.rows, car.action_space),
+                *agreement(shadowed.rows),
                 f"{shadowed.passes_begun / len(races):.1f}",
                 f"{passed}/{len(mine)}",
                 f"{sum(r.overtakes for r in mine) / len(mine):.2f}",
