@@ -386,7 +386,8 @@ class Trainer:
                 on_iteration(stats)
 
         try:
-            while not self._budget_spent(loop.latest + 1, elapsed()):
+            spent = self._budget_spent(loop.latest + 1, elapsed())
+            while not spent:
                 it = loop.latest + 1
                 self._draw_opponents(env, pool)
                 if loop.latest == loop.finished:
@@ -395,10 +396,13 @@ class Trainer:
                 loop.latest = it
                 losses = runner.iteration(it)
                 stats = self._finish_iteration(runner, env, pool, it, elapsed(), losses)
+                # One reading of the clock says both that this iteration is the last and
+                # that it is evaluated as the last (a later reading could stop unevaluated).
+                spent = self._last_iteration(it, stats.elapsed_s)
                 if pending is not None and evaluator is not None:
                     finish(pending, self._summarize(evaluator.result()))
                     pending = None
-                if not self._evaluation_due(it, stats.elapsed_s):
+                if not self._evaluation_due(it, spent):
                     finish(_Evaluated(stats), None)
                 elif not background:
                     evaluation = self._evaluate(runner)
@@ -517,11 +521,11 @@ class Trainer:
         if self.pursuit_lap_s is not None:
             pool.set_pace(lap, self.pursuit_lap_s)
 
-    def _evaluation_due(self, it: int, elapsed: float) -> bool:
-        """Every ``eval_every`` iterations and after the one that spends the budget, of
-        iterations or of minutes (rank 0 only)."""
+    def _evaluation_due(self, it: int, last: bool) -> bool:
+        """Every ``eval_every`` iterations and after the ``last`` one, which spends the
+        budget of iterations or of minutes (rank 0 only)."""
         every = (it + 1) % self.settings.eval_every == 0
-        return self.writes_run_folder and (every or self._last_iteration(it, elapsed))
+        return self.writes_run_folder and (every or last)
 
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
         """Race the greedy policy in this process (race mode; head to model: against the

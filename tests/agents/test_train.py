@@ -262,6 +262,32 @@ def test_a_minutes_budget_ends_with_an_evaluation(tmp_path):
     assert (tmp_path / "run" / "checkpoints" / "last.pt").exists()
 
 
+def test_an_iteration_ending_just_inside_the_minutes_is_not_the_last_unevaluated(
+    tmp_path, monkeypatch
+):
+    """The clock is read once per iteration: an iteration that ends just before the budget
+    is spent is followed by one more, evaluated as the last (a run that stopped at the
+    next reading of the clock kept no evaluated checkpoint, so no ``best``)."""
+
+    class SteppedClock:
+        """25 s pass between two readings: iteration 0 ends at 50 s, a minute's budget
+        is spent at the next reading."""
+
+        def __init__(self) -> None:
+            self.now = 0.0
+
+        def monotonic(self) -> float:
+            self.now += 25.0
+            return self.now
+
+    monkeypatch.setattr("agents.train.time", SteppedClock())
+    seen = []
+    Trainer(_settings(minutes=1, eval_every=1000), tmp_path / "run", TINY).run(seen.append)
+    assert seen[0].elapsed_s < 60.0 and seen[0].eval is None
+    assert len(seen) == 2 and seen[-1].eval is not None
+    assert (tmp_path / "run" / "checkpoints" / "best.pt").exists()
+
+
 def test_ctrl_c_during_an_update_keeps_the_weights_it_started_from(tmp_path, monkeypatch):
     from agents.runner import RacingRunner
 
