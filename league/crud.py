@@ -100,8 +100,11 @@ def _new_event(spec: EventCreate, created_by: int | None, kind: str = "league") 
     opens_at = spec.opens_at or utcnow()
     if spec.closes_at is not None and spec.closes_at <= opens_at:
         raise ValueError("closes_at must be later than opens_at")
-    if spec.round_interval_s is not None and spec.race_type != "head_to_model":
-        raise ValueError("round_interval_s is for head_to_model events only")
+    if spec.race_type != "head_to_model":
+        if spec.round_interval_s is not None:
+            raise ValueError("round_interval_s is for head_to_model events only")
+        if "round_bot" in spec.model_fields_set:
+            raise ValueError("round_bot is for head_to_model events only")
     return Event(
         kind=kind,
         name=spec.name,
@@ -115,6 +118,7 @@ def _new_event(spec: EventCreate, created_by: int | None, kind: str = "league") 
         opens_at=opens_at,
         closes_at=spec.closes_at,
         round_interval_s=spec.round_interval_s,
+        round_bot=spec.round_bot,
         next_round_at=opens_at if spec.round_interval_s else None,
         created_by=created_by,
     )

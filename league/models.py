@@ -27,6 +27,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 
 from arena.config import RACE_TYPES
+from league.bots import BOT_LEVELS
 
 NAMING = {
     "ix": "ix_%(column_0_label)s",
@@ -116,7 +117,8 @@ class Event(Base):
     ``rounds_served_at`` is when the queue last leased one of its round jobs (its rounds
     take their turn like a racer, :mod:`league.jobs.queue`). ``kind`` is ``league`` for the
     events admins create, ``evaluation`` for a racer's unlisted evaluation of one model
-    (``/api/models/{id}/evaluations``): one entry, no other entries, no standings snapshot."""
+    (``/api/models/{id}/evaluations``): one entry, no other entries, no standings snapshot.
+    ``round_bot`` is the bot (:mod:`league.bots`) that fills its head-to-model grids."""
 
     __tablename__ = "events"
     __table_args__ = (
@@ -124,10 +126,13 @@ class Event(Base):
         CheckConstraint(_in("ranking_metric", RANKING_METRICS), name="ranking_metric"),
         CheckConstraint(_in("direction", ("ccw", "cw")), name="direction"),
         CheckConstraint(_in("kind", EVENT_KINDS), name="kind"),
+        CheckConstraint(_in("round_bot", BOT_LEVELS), name="round_bot"),
     )
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     kind: Mapped[str] = mapped_column(String(16), default="league", server_default="league")
+    # events created before this column raced the pursuit bot (migration 0008)
+    round_bot: Mapped[str] = mapped_column(String(16), server_default="pursuit")
     name: Mapped[str] = mapped_column(String(100))
     race_type: Mapped[str] = mapped_column(String(32))
     track: Mapped[str] = mapped_column(String(64))

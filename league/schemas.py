@@ -19,6 +19,7 @@ from pydantic import (
 
 from agents.train_job import MAX_REWARD_SOURCE
 from arena.config import BotConfig, ObstacleConfig, Penalties, RaceType, SeedVariation
+from league.bots import DEFAULT_BOT, BotLevel
 from submissions import Problem
 
 MAX_ID = 2**31 - 1
@@ -153,6 +154,12 @@ class EventCreate(BaseModel):
     opens_at: UtcTime | None = None
     closes_at: UtcTime | None = None
     round_interval_s: int | None = Field(default=None, ge=60, le=30 * 86400)
+    round_bot: BotLevel = Field(
+        default=DEFAULT_BOT,
+        description="head_to_model only: the bot a model entered alone races (pursuit: the "
+        "console's default car at 0.4-0.8 m/s on the racing line, blind to other cars; racer: "
+        "the passing pursuit driver at the racing line's pace, 0.5-4 m/s)",
+    )
 
 
 class EventOut(_Out):
@@ -170,6 +177,7 @@ class EventOut(_Out):
     opens_at: datetime
     closes_at: datetime | None
     round_interval_s: int | None
+    round_bot: str
     status: Literal["upcoming", "open", "closed"]
     created_at: datetime
 

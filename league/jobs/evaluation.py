@@ -17,10 +17,9 @@ from sqlalchemy.orm import Session
 from arena.config import CarConfig, RaceConfig, resolve_track
 from arena.policy import Policy
 from arena.race import StepGuard
+from league.bots import BOT_LEVELS, bot_car, bot_driver
 from league.models import Entry, Event, Job, Model
 from league.store.base import DigestMismatch, FileStore
-
-BOTS = ("pursuit",)
 
 
 @dataclass(frozen=True)
@@ -127,15 +126,15 @@ def build_plan(
             cars.append(model_car(name, model.info))
             plans.append(CarPlan(name, entry.id, model=checked_model_bytes(storage, model)))
         else:
-            if slot.get("bot") not in BOTS:
+            if slot.get("bot") not in BOT_LEVELS:
                 raise ValueError(f"unknown bot {slot.get('bot')!r} in job {job.id}")
-            cars.append(CarConfig(name=name))
+            cars.append(bot_car(name, slot["bot"]))
             plans.append(CarPlan(name, None, bot=slot["bot"]))
     slots = len(lineup(job))
     while job.kind == "round" and len(cars) < 2:  # suspensions emptied the grid: a bot fills it
         name = car_name({}, slots + len(cars))
-        cars.append(CarConfig(name=name))
-        plans.append(CarPlan(name, None, bot=BOTS[0]))
+        cars.append(bot_car(name, event.round_bot))
+        plans.append(CarPlan(name, None, bot=event.round_bot))
     config = RaceConfig.build(**event.ruleset, cars=cars, seed=job.seed)
     return RacePlan(config, tuple(plans), step_budget_ms, step_window)
 
@@ -176,7 +175,6 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
     Model files were fully validated when stored and the plan's bytes were checked against
     that sha256 (:func:`checked_model_bytes`), so only the static checks run again here.
     """
-    from arena.pursuit import PurePursuitPolicy
     from submissions import load_policy
 
     drivers: dict[str, Policy] = {}
@@ -192,5 +190,5 @@ def policies(plan: RacePlan) -> dict[str, Policy]:
         else:
             if track is None:
                 track = resolve_track(plan.config)[0]
-            drivers[car.name] = PurePursuitPolicy(track, spec.action_space)
+            drivers[car.name] = bot_driver(str(car.bot), track, spec.action_space)
     return drivers

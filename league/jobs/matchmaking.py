@@ -21,7 +21,8 @@ from dataclasses import dataclass
 from itertools import combinations
 from typing import Any
 
-BOT = {"bot": "pursuit"}
+from league.bots import DEFAULT_BOT
+
 BETA = 25.0 / 6.0  # openskill's default performance spread
 
 
@@ -66,11 +67,14 @@ def plan_round(
     max_cars: int,
     rng: random.Random,
     recent: Mapping[frozenset[int], int] | None = None,
+    bot: str = DEFAULT_BOT,
 ) -> list[list[dict[str, Any]]]:
-    """Grids (lists of ``{"entry_id": id}`` / bot slots) so every model races >= ``k`` times.
+    """Grids (lists of ``{"entry_id": id}`` / ``{"bot": bot}`` slots) so every model races
+    >= ``k`` times.
 
     ``recent`` counts the meetings of pairs of entries in recent rounds (see
-    :func:`pairings`); they damp a pairing as meetings in this round do.
+    :func:`pairings`); they damp a pairing as meetings in this round do. ``bot`` names the
+    bot (:mod:`league.bots`) that fills a grid of a model entered alone.
     """
     if not candidates:
         return []
@@ -93,5 +97,5 @@ def plan_round(
             races[car.entry_id] += 1
         slots = [{"entry_id": c.entry_id} for c in grid]
         met.update(pairings([slots]))
-        grids.append(slots + [dict(BOT) for _ in range(size - len(grid))])
+        grids.append(slots + [{"bot": bot} for _ in range(size - len(grid))])
     return grids

@@ -135,6 +135,7 @@ def start_round(session: Session, event: Event, now: datetime, settings: Setting
         settings.round_max_cars,
         rng,
         recent=pairings(_lineups(session, event.id, number - 1)),
+        bot=event.round_bot,
     )
     seeds = round_seeds(event.id, number, len(grids), _round_seeds_used(session, event.id))
     rows = [

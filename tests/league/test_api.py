@@ -89,6 +89,19 @@ def test_event_validation_is_readable(league: League) -> None:
         times = {"opens_at": "2030-01-02T00:00:00Z", "closes_at": "2030-01-01T00:00:00"}
         window = admin.post("/api/events", json={"name": "x", **times})
         assert window.status_code == 422
+        lone = admin.post("/api/events", json={"name": "x", "round_bot": "racer"})
+        assert lone.status_code == 422 and "head_to_model" in lone.json()["detail"]
+        ghost = {"name": "x", "race_type": "head_to_model", "round_bot": "ghost"}
+        unknown_bot = admin.post("/api/events", json=ghost)
+        assert unknown_bot.status_code == 422 and "racer" in str(unknown_bot.json()["detail"])
+
+
+def test_a_head_to_model_event_says_which_bot_fills_its_grids(league: League) -> None:
+    cup = create_event(league, name="Cup", race_type="head_to_model", round_interval_s=60)
+    assert cup["round_bot"] == "racer"  # the default
+    slow = create_event(league, name="Slow", race_type="head_to_model", round_bot="pursuit")
+    with league.client() as anon:
+        assert anon.get(f"/api/events/{slow['id']}").json()["round_bot"] == "pursuit"
 
 
 def test_time_trial_flow_and_leaderboard(league: League) -> None:

@@ -224,6 +224,12 @@ def test_the_migration_keeps_events_entries_and_jobs_as_league_ones(
             conn.execute(text(ENTRY.replace("(1, 1,", "(2, 2,")))
         with pytest.raises(IntegrityError), engine.begin() as conn:
             conn.execute(text("UPDATE events SET kind = 'secret' WHERE id = 1"))
+        with engine.connect() as conn:  # 0008: an older event keeps the bot it raced
+            assert conn.execute(text("SELECT round_bot FROM events WHERE id = 1")).scalar() == (
+                "pursuit"
+            )
+        with pytest.raises(IntegrityError), engine.begin() as conn:
+            conn.execute(text("UPDATE events SET round_bot = 'ghost' WHERE id = 1"))
         with engine.begin() as conn:  # an older league must not list an evaluation as its own
             command.downgrade(alembic_config(conn), "0006")
         with engine.connect() as conn:

@@ -9,12 +9,13 @@ import time
 from collections import Counter
 from datetime import timedelta
 
+import pytest
 from sqlalchemy import select, update
 
 from league.jobs.matchmaking import Candidate, plan_round
 from league.jobs.scheduler import Scheduler, round_seeds
 from league.jobs.worker import Worker
-from league.models import Entry, Event, Job, utcnow
+from league.models import Entry, Event, Job, RaceCar, utcnow
 from league.ranking import initial_skill
 from tests.league_ops.conftest import Ops
 from tests.league_ops.helpers import enter, event, model, racer, statuses, wait_until
@@ -39,7 +40,36 @@ def test_close_ratings_meet_more_often() -> None:
 
 def test_a_lone_model_races_a_bot() -> None:
     (grid,) = plan_round([Candidate(7, 25, 8)], k=1, max_cars=4, rng=random.Random(0))
+    assert grid == [{"entry_id": 7}, {"bot": "racer"}]
+    (grid,) = plan_round([Candidate(7, 25, 8)], 1, 4, random.Random(0), bot="pursuit")
     assert grid == [{"entry_id": 7}, {"bot": "pursuit"}]
+
+
+@pytest.mark.parametrize("bot", ["racer", "pursuit"])
+def test_a_lone_model_races_the_events_bot_in_that_bots_car(ops: Ops, bot: str) -> None:
+    """A head-to-model event's ``round_bot`` fills the grid of its lone model, and races in
+    its own car: the racer laps the 23 m speedway at the racing line's pace (about 7.5 s
+    from the grid), the pursuit bot at the console's 0.8 m/s does not finish in 20 s."""
+    ev = event(ops, race_type="head_to_model", track="slipstream_speedway",
+               round_interval_s=60, seeds=[0], round_bot=bot)  # fmt: skip
+    enter(ops, ev, model(ops, racer(ops, "ada")))
+    races = Scheduler(ops.settings).tick(utcnow())["round_jobs"]
+    with ops.sessions() as session:
+        lineups = [job.lineup for job in session.scalars(select(Job))]
+    assert lineups == [[{"entry_id": 1}, {"bot": bot}]] * races
+    worker = Worker(ops.settings, "w")
+    while worker.run_once():
+        pass
+    assert statuses(ops) == {"done": races}
+    with ops.sessions() as session:
+        cars = session.scalars(select(RaceCar).where(RaceCar.entry_id.is_(None))).all()
+    assert len(cars) == races
+    for car in cars:
+        if bot == "racer":
+            assert car.laps == 1 and car.total_ms is not None and car.total_ms < 9000
+            assert car.off_track_count == 0 and car.crash_count == 0
+        else:
+            assert car.laps == 0 and 8.0 < car.distance_m < 18.0  # 0.8 m/s (and noise), 20 s
 
 
 def test_round_seeds_are_reproducible_fresh_and_unused() -> None:
