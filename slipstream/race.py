@@ -4,8 +4,9 @@ the league's rules; print the results (or win rates over several seeds) and writ
 Model files are validated as the league validates an upload (never unpickled or imported),
 then each drives a car with the sensors and action space it declares; a model that faults
 in the race (NaN or inf, onnxruntime failing on a real frame) is out of that race with the
-reason, as in the league. ``--bots N`` adds N cars driven by the passing pursuit driver
-(the imitation teacher) with continuous actions up to 4 m/s. With ``--seeds K`` the cars
+reason, as in the league. ``--bots N`` adds N of the league's ``racer`` bots
+(:mod:`league.bots`: the passing pursuit driver, the imitation teacher, with continuous
+actions up to 4 m/s). With ``--seeds K`` the cars
 race K seeded races, the grid rotating one slot a race (so with two cars each starts in
 front half the time).
 """
@@ -61,16 +62,14 @@ def _model_race(
     models: list[tuple[str, Any]], bots: int, rules: dict[str, Any]
 ) -> tuple[RaceConfig, RaceRunner]:
     """The first race's config and a function that races any rotation of it."""
-    from arena.actions import ContinuousActionSpace
-    from arena.config import BotConfig, CarConfig, ObstacleConfig
-    from arena.pursuit import PassingPursuitPolicy
+    from arena.config import BotConfig, ObstacleConfig
     from arena.race import StepGuard, run_race
+    from league.bots import bot_car, bot_driver
     from league.jobs.evaluation import model_car
     from submissions import ModelFault
 
     cars = [model_car(name, policy.info.model_dump(mode="json")) for name, policy in models]
-    racing = ContinuousActionSpace()
-    cars += [CarConfig(name=f"bot{i}", action_space=racing) for i in range(bots)]
+    cars += [bot_car(f"bot{i}", "racer") for i in range(bots)]
     defaults = {
         "object_avoidance": ("obstacles", ObstacleConfig),
         "head_to_bot": ("bots", BotConfig),
@@ -82,7 +81,7 @@ def _model_race(
     track, _ = resolve_track(config)
     drivers = dict(models)
     drivers.update(
-        {c.name: PassingPursuitPolicy(track, c.action_space) for c in config.cars[len(models) :]}
+        {c.name: bot_driver("racer", track, c.action_space) for c in config.cars[len(models) :]}
     )
     guard = StepGuard(faults=(ModelFault,), cars=frozenset(name for name, _ in models))
 
@@ -99,7 +98,11 @@ def race_command(
     ] = None,
     bots: Annotated[
         int,
-        typer.Option(help="Cars driven by the passing pursuit driver, beside the models.", min=0),
+        typer.Option(
+            help="Cars driven by the league's racer bot (the passing pursuit driver), beside "
+            "the models.",
+            min=0,
+        ),
     ] = 0,
     track: Annotated[
         str | None,
