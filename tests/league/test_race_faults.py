@@ -318,3 +318,5 @@ def test_hostile_models_lose_their_races_not_the_rounds_and_are_suspended(
         assert session.get_one(Job, queued).status == "done"
         race = session.scalar(select(Race).where(Race.job_id == queued))
         assert {c.entry_id for c in race.cars} == {good["entry_id"], None}
+        (bot,) = (c for c in race.cars if c.entry_id is None)
+        assert bot.laps == 1  # the event's round_bot, the racer (at 0.8 m/s pursuit makes 8 m)

@@ -54,6 +54,7 @@ def test_a_lone_model_races_the_events_bot_in_that_bots_car(ops: Ops, bot: str) 
                round_interval_s=60, seeds=[0], round_bot=bot)  # fmt: skip
     enter(ops, ev, model(ops, racer(ops, "ada")))
     races = Scheduler(ops.settings).tick(utcnow())["round_jobs"]
+    assert races >= 1
     with ops.sessions() as session:
         lineups = [job.lineup for job in session.scalars(select(Job))]
     assert lineups == [[{"entry_id": 1}, {"bot": bot}]] * races
