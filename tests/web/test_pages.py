@@ -33,6 +33,8 @@ def test_event_page_names_the_event_and_its_rules(league: League, site: Site) ->
     assert "Head to head" not in trial.headings
     assert duel.headings[:2] == ["Head-to-Head Cup", "Head to head"]
     assert "head to model" in duel.text and "ranked by rating" in duel.text
+    assert "A model entered alone races the racer bot." in duel.text
+    assert "entered alone" not in trial.text
     (row,) = duel.tables["head-to-head"]
     assert (row[0], row[3], row[4]) == ("alice · alice-model", "bob · bob-model", "2")
     assert int(row[1]) + int(row[2]) == 2  # each race: one model ahead of the other
