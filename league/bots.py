@@ -29,21 +29,24 @@ DEFAULT_BOT: BotLevel = "racer"
 """A new event's bot. Events created before events had a ``round_bot`` keep ``pursuit``."""
 
 
+def _known(level: str) -> str:
+    """``level`` itself, or ``ValueError`` naming the league's bots."""
+    if level not in BOT_LEVELS:
+        raise ValueError(f"unknown bot {level!r}: the league's bots are {', '.join(BOT_LEVELS)}")
+    return level
+
+
 def bot_car(name: str, level: str) -> CarConfig:
-    """The car of a ``level`` bot named ``name`` (``ValueError`` for an unknown level)."""
-    if level == "pursuit":
-        return CarConfig(name=name)  # the console's default action space
-    if level == "racer":
+    """The car of a ``level`` bot named ``name`` (``ValueError`` for an unknown level): the
+    racing car for ``racer``, the console's default action space for ``pursuit``."""
+    if _known(level) == "racer":
         return CarConfig(name=name, action_space=ContinuousActionSpace())
-    raise ValueError(f"unknown bot {level!r}: the league's bots are {', '.join(BOT_LEVELS)}")
+    return CarConfig(name=name)
 
 
 def bot_driver(level: str, track: Track, action_space: ActionSpace) -> Policy:
     """The driver of a ``level`` bot on ``track`` in its car's ``action_space``."""
     from arena.pursuit import PassingPursuitPolicy, PurePursuitPolicy
 
-    if level == "racer":
-        return PassingPursuitPolicy(track, action_space)
-    if level == "pursuit":
-        return PurePursuitPolicy(track, action_space)
-    raise ValueError(f"unknown bot {level!r}: the league's bots are {', '.join(BOT_LEVELS)}")
+    driver = PassingPursuitPolicy if _known(level) == "racer" else PurePursuitPolicy
+    return driver(track, action_space)
