@@ -26,6 +26,7 @@ import torch.nn as nn
 from rsl_rl.algorithms import Distillation
 from tensordict import TensorDict
 
+from agents.fused_adam import fuse_adam
 from arena.actions import ContinuousActionSpace, DiscreteActionSpace
 from arena.pursuit import PassingPursuitPolicy
 from tracks.track import Track
@@ -125,6 +126,7 @@ class BehaviourCloning(Distillation):
         **kwargs: Any,
     ):
         super().__init__(*args, **kwargs)
+        fuse_adam(self.optimizer)
         self.num_mini_batches = num_mini_batches
         self.discrete = discrete
         self.teacher_loaded = True  # the teacher is the pursuit driver, not a network
@@ -191,6 +193,7 @@ class BehaviourCloning(Distillation):
         self._raw_student.load_state_dict(loaded_dict["actor_state_dict"], strict=strict)
         if load_cfg is None or load_cfg.get("optimizer", False):
             self.optimizer.load_state_dict(loaded_dict["optimizer_state_dict"])
+            fuse_adam(self.optimizer)
         return True
 
 

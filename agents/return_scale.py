@@ -15,6 +15,8 @@ import torch
 from rsl_rl.algorithms import PPO
 from tensordict import TensorDict
 
+from agents.fused_adam import fuse_adam
+
 RETURN_SCALE_CLIP = 10.0  # scaled rewards are clipped to +-this (early, tiny-variance steps)
 
 
@@ -66,6 +68,7 @@ class ReturnScaledPPO(PPO):
 
     def __init__(self, *args: Any, scale_returns: bool = True, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
+        fuse_adam(self.optimizer)
         self.return_scale = ReturnScale(self.gamma).to(self.device) if scale_returns else None
 
     def process_env_step(
@@ -86,6 +89,7 @@ class ReturnScaledPPO(PPO):
     def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
         """PPO's load; the return scale too when the critic is loaded and it was saved."""
         result = super().load(loaded_dict, load_cfg, strict)
+        fuse_adam(self.optimizer)
         saved = loaded_dict.get("return_scale_state_dict")
         if self.return_scale is not None and saved and (load_cfg or {"critic": 1}).get("critic"):
             self.return_scale.load_state_dict(saved)
