@@ -143,6 +143,18 @@ def test_limits_are_per_race_not_per_child() -> None:
         sandbox.close()
 
 
+def _wait_until_dead(pid: int, timeout_s: float = 10.0) -> None:
+    """Until ``pid`` has exited (a zombie its parent has not reaped): a SIGKILL takes
+    effect when the kernel next schedules the process, later than 0.1 s on a busy machine."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with open(f"/proc/{pid}/stat") as handle:
+            if handle.read().rsplit(")", 1)[1].split()[0] == "Z":
+                return
+        time.sleep(0.01)
+    raise AssertionError(f"process {pid} still alive {timeout_s} s after SIGKILL")
+
+
 def test_children_are_replaced_after_max_runs_on_high_water_and_when_killed_idle() -> None:
     sandbox = WarmSandbox(handler, QUICK, max_runs=2, high_water_mb=64)
     try:
@@ -150,7 +162,7 @@ def test_children_are_replaced_after_max_runs_on_high_water_and_when_killed_idle
         assert pids[0] == pids[1] != pids[2] == pids[3] and sandbox.forks == 2
         sandbox.run(b"pid")
         os.kill(sandbox.pid, 9)  # killed between races: the next race gets a new child
-        time.sleep(0.1)
+        _wait_until_dead(sandbox.pid)
         assert sandbox.run(b"pid") not in pids and sandbox.forks == 4
         assert sandbox.run(b"keep100") == 1 and sandbox.pid is None  # over the high water
         assert sandbox.run(b"keep10") == 1 and sandbox.forks == 5  # a new child: nothing kept
