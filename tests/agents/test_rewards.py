@@ -30,6 +30,7 @@ SAMPLES = (
     "object_avoidance",
     "head_to_head",
     "pursuit",
+    "progress_rate",
 )
 
 
@@ -72,6 +73,42 @@ def test_samples_run_on_real_env_params(env_params, name: str, race_type: str) -
         assert abs(reward) <= 1e5
 
 
+def test_progress_rate_pays_the_metres_of_centre_line_a_lap_is_made_of() -> None:
+    """In a left turn of radius 2 m, 0.5 m inside the centre line is a third more of the
+    lap for each metre driven, 0.5 m outside a fifth less (paid squared); a car pointing
+    off the track's direction makes less; off the road, nothing."""
+    rate = load_sample("progress_rate")
+    angles = np.linspace(0.0, 2.0 * math.pi, 64)[:-1]
+    points = [(2.0 * math.cos(a), 2.0 * math.sin(a)) for a in angles]
+    circle = [*points, points[0]]  # a closed loop, as track files are
+
+    def beside(k: int, **changes: object) -> dict:
+        """On the centre line beside segment k -> k + 1 at 2 m/s, heading along it."""
+        a, b = circle[k], circle[k + 1]
+        heading = math.degrees(math.atan2(b[1] - a[1], b[0] - a[0]))
+        params = {
+            "all_wheels_on_track": True,
+            "speed": 2.0,
+            "heading": heading,
+            "waypoints": circle,
+            "closest_waypoints": [k, k + 1],
+            "distance_from_center": 0.0,
+            "is_left_of_center": True,
+        }
+        return {**params, **changes}
+
+    centre_pay = rate(beside(10))
+    assert centre_pay == pytest.approx(0.25, rel=0.01)  # (2 m/s of a 4 m/s car) squared
+    inside = beside(10, distance_from_center=0.5)
+    assert rate(inside) == pytest.approx(centre_pay / 0.75**2, rel=0.02)
+    outside = beside(10, distance_from_center=0.5, is_left_of_center=False)
+    assert rate(outside) == pytest.approx(centre_pay / 1.25**2, rel=0.02)
+    askew = beside(10, heading=beside(10)["heading"] + 40.0)
+    assert rate(askew) == pytest.approx(centre_pay * math.cos(math.radians(40.0)) ** 2, rel=0.02)
+    assert rate(beside(10, all_wheels_on_track=False)) < 0.01
+    assert rate(beside(len(circle) - 2)) == pytest.approx(centre_pay, rel=0.01)  # the seam
+
+
 def test_sample_params_have_the_env_keys(env_params) -> None:
     for race_type in RACE_TYPES:
         assert set(sample_params(race_type)) == set(env_params[race_type][0])
@@ -88,6 +125,9 @@ def test_samples_prefer_what_they_document() -> None:
     assert borders({**centre, "all_wheels_on_track": False}) < borders(centre)
     pursuit = load_sample("pursuit")
     assert pursuit({**centre, "speed": 3.0}) > pursuit(centre)
+
+    rate = load_sample("progress_rate")
+    assert rate({**centre, "speed": 3.0}) > rate(centre)
 
     boxes = sample_params("object_avoidance")  # next box 1.5 m ahead in the inner lane
     avoid = load_sample("object_avoidance", "object_avoidance")
