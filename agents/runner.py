@@ -38,7 +38,6 @@ from tensordict import TensorDict
 
 from agents.learner_threads import LearnerThreads
 from agents.networks import channels_last, images_pooled_once
-from agents.staggered import collect_staggered
 
 # Largest weight of a sample's advantage, pi_prox / mu, in an overlapped update: a bound
 # on the variance one rare action of the collecting policy can add.
@@ -140,9 +139,7 @@ class RacingRunner(OnPolicyRunner):
     :func:`thread_counts` reads it (``None``: auto, which in turn on a CPU drops to one
     while other processes crowd the cores, :mod:`agents.learner_threads`). ``sync``:
     collect, then update, as rsl-rl does; otherwise (PPO only) the update overlaps the next
-    rollout (module docstring). ``stagger``: a PPO rollout over two or more env workers acts
-    for half of them while the others step (:mod:`agents.staggered`); otherwise, and for
-    imitation, every step acts for all slots, then steps all races, as rsl-rl does.
+    rollout (module docstring).
     """
 
     def __init__(
@@ -153,7 +150,6 @@ class RacingRunner(OnPolicyRunner):
         device: str,
         threads: int | None = None,
         sync: bool = False,
-        stagger: bool = True,
     ) -> None:
         with _quiet():
             super().__init__(env, train_cfg, log_dir=log_dir, device=device)
@@ -181,10 +177,6 @@ class RacingRunner(OnPolicyRunner):
         adaptive = threads is None and not self.overlapped and not self.device.startswith("cuda")
         self.learner_threads = LearnerThreads(self.threads[1]) if adaptive else None
         self._pending = False  # the learner's storage holds a rollout not yet learned from
-        # PPO acts for half the workers' races while the others step (agents.staggered);
-        # imitation's act draws per slot who drives, so it steps in lock-step.
-        halves = getattr(env, "halves", None)
-        self.staggered = stagger and halves is not None and hasattr(self.alg, "critic")
 
     def start(self) -> None:
         """What ``learn`` does before its first iteration: observations, train mode, synced
@@ -314,31 +306,18 @@ class RacingRunner(OnPolicyRunner):
 
     def _collect_rollout(self, it: int, alg: object) -> None:
         """``num_steps_per_env`` steps of every slot with ``alg``'s policy into its
-        storage, then the returns; staggered across the workers' halves
-        (:mod:`agents.staggered`) where :attr:`staggered`."""
+        storage, then the returns."""
         obs = self._obs
-        steps = self.cfg["num_steps_per_env"]
-        nan_check = self.cfg.get("check_for_nan", True)
-
-        def check(obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor) -> None:
-            if nan_check:
-                self._check_nan(it, obs, rewards, dones)
-
-        def record(rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
-            self.logger.process_env_step(rewards, dones, extras, None)  # no RND
-
         with torch.inference_mode():
-            if self.staggered:
-                obs = collect_staggered(alg, self.env, obs, steps, self.device, check, record)
-            else:
-                for _ in range(steps):
-                    actions = alg.act(obs)
-                    obs, rewards, dones, extras = self.env.step(actions.to(self.env.device))
-                    check(obs, rewards, dones)
-                    obs = obs.to(self.device)
-                    rewards, dones = rewards.to(self.device), dones.to(self.device)
-                    alg.process_env_step(obs, rewards, dones, extras)
-                    record(rewards, dones, extras)
+            for _ in range(self.cfg["num_steps_per_env"]):
+                actions = alg.act(obs)
+                obs, rewards, dones, extras = self.env.step(actions.to(self.env.device))
+                if self.cfg.get("check_for_nan", True):
+                    self._check_nan(it, obs, rewards, dones)
+                obs = obs.to(self.device)
+                rewards, dones = rewards.to(self.device), dones.to(self.device)
+                alg.process_env_step(obs, rewards, dones, extras)
+                self.logger.process_env_step(rewards, dones, extras, None)  # no RND
             alg.compute_returns(obs)
         self._obs = obs
 

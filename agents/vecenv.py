@@ -401,7 +401,6 @@ class RacingVecEnv(VecEnv):
         self._races_of = [list(range(self.num_races))[w::shares] for w in range(shares)]
         per_car = len(self.learner_cars)
         offsets = np.cumsum([0] + [len(r) * per_car for r in self._races_of]).tolist()
-        self._slot_offsets: list[int] = offsets  # worker w's slots: offsets[w]:offsets[w + 1]
         kwargs = [
             {
                 "config_json": config.to_json(),
@@ -481,68 +480,23 @@ class RacingVecEnv(VecEnv):
 
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
         """Step every race with the slots' actions (one-hot rows or 2 continuous values)."""
-        if self._local is not None:
-            batches = [self._local.step(self._action_values(actions))]
-            return self._step_result(batches, slice(0, self.num_envs))
-        everyone = range(len(self._conns))
-        self.send_step(everyone, actions)
-        return self.receive_step(everyone)
-
-    @property
-    def halves(self) -> tuple[range, range] | None:
-        """The workers split in two, for a collector that steps one half while it acts for
-        the other (:func:`agents.staggered.collect_staggered`); None in-process or with
-        one worker."""
-        count = len(self._conns)
-        if count < 2:
-            return None
-        return range(count // 2), range(count // 2, count)
-
-    def slots_of(self, workers: range) -> slice:
-        """The slots (rows of observations and actions) of consecutive ``workers``."""
-        return slice(self._slot_offsets[workers.start], self._slot_offsets[workers.stop])
-
-    def send_step(self, workers: range, actions: torch.Tensor) -> None:
-        """Start a step of ``workers``' races with their slots' actions (``actions`` holds
-        those slots' rows only); :meth:`receive_step` ends it."""
-        values = self._action_values(actions)
-        first = self._slot_offsets[workers.start]
-        for w in workers:
-            rows = slice(self._slot_offsets[w] - first, self._slot_offsets[w + 1] - first)
-            self._conns[w].send(("step", (values[rows],)))
-
-    def receive_step(self, workers: range) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        """The step :meth:`send_step` started, as :meth:`step` returns it for those
-        workers' slots."""
-        results, failure = [], None
-        for w in workers:  # read every reply, so none is left in a pipe
-            try:
-                results.append(self._receive(self._conns[w]))
-            except RuntimeError as exc:
-                failure = failure or exc
-        if failure is not None:
-            raise failure
-        return self._step_result(results, self.slots_of(workers))
-
-    def _action_values(self, actions: torch.Tensor) -> np.ndarray:
-        """Slot actions as the races take them: action indices or clipped float pairs."""
         acts = actions.detach().to("cpu")
         if self.discrete:
-            return acts.argmax(dim=-1).numpy()
-        return acts.clamp(-1.0, 1.0).numpy().astype(np.float32)
-
-    def _step_result(
-        self, batches: list[StepBatch], slots: slice
-    ) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
-        """Observations, rewards, dones and extras of the ``slots`` these batches hold."""
-        obs = self._to_tensordict(batches)
-        self._obs[slots] = obs
+            values = acts.argmax(dim=-1).numpy()
+        else:
+            values = acts.clamp(-1.0, 1.0).numpy().astype(np.float32)
+        per_group, start = [], 0
+        for races in self._races_of:
+            count = len(races) * len(self.learner_cars)
+            per_group.append((values[start : start + count],))
+            start += count
+        batches = self._call("step", per_group)
+        self._obs = self._to_tensordict(batches)
         rewards = torch.tensor(np.concatenate([b.rewards for b in batches]), dtype=torch.float32)
         terminated = torch.tensor(np.concatenate([b.terminated for b in batches]))
         truncated = torch.tensor(np.concatenate([b.truncated for b in batches]))
         dones = terminated | truncated
-        lengths = self.episode_length_buf[slots]
-        self.episode_length_buf[slots] = torch.where(dones, 0, lengths + 1)
+        self.episode_length_buf = torch.where(dones, 0, self.episode_length_buf + 1)
         episodes = [e for b in batches for e in b.episodes]
         self._episodes.extend(episodes)
         extras: dict[str, Any] = {"time_outs": truncated.clone()}
@@ -554,7 +508,7 @@ class RacingVecEnv(VecEnv):
                     [float(e["lap_complete"]) for e in episodes]
                 ),
             }
-        return obs.clone(), rewards, dones, extras
+        return self._obs.clone(), rewards, dones, extras
 
     # ------------------------------------------------------------------ extras
     def pop_episodes(self) -> list[dict[str, Any]]:

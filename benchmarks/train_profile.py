@@ -3,10 +3,8 @@
 Trains ``--iterations`` PPO iterations (rsl-rl, as ``slipstream train`` builds them, no
 evaluations or run files) for each ``--device``, ``--workers``, ``--mode`` (sync: collect
 then update; overlapped: the update runs during the next collection) and ``--critic``
-value and ``--collect`` (staggered: the learner acts for half the workers' races while the
-others step; lock-step: rsl-rl's), with ``--races`` parallel races and ``--threads`` torch
-threads (defaults: train's; the table shows the threads while collecting / updating), and
-prints one table: samples/s
+value, with ``--races`` parallel races and ``--threads`` torch threads (defaults: train's;
+the table shows the threads while collecting / updating), and prints one table: samples/s
 end to end, collection and update seconds per iteration, the share of the wall time the
 env workers and the learner's update each waited, how far the policy that starts an update
 is from the one that collected its rollout (mean ``|ratio - 1|``, 0 when synchronous), the
@@ -22,7 +20,6 @@ Run::
     .venv/bin/python benchmarks/train_profile.py --sensors camera --critic sensors,privileged
     .venv/bin/python benchmarks/train_profile.py --sensors lidar --device cpu,cuda
     .venv/bin/python benchmarks/train_profile.py --workers 0,1,2 --mode sync,overlapped
-    .venv/bin/python benchmarks/train_profile.py --workers 2 --collect staggered,lock-step
 """
 
 from __future__ import annotations
@@ -54,7 +51,6 @@ def measure(
     critic: CriticInput,
     hp: Hyperparameters,
     mode: str,
-    collect_mode: str,
 ) -> dict[str, float]:
     """Train ``args.iterations`` (+1 warm-up) iterations; mean timings and the last losses."""
     sensors = tuple(args.sensors.split(","))
@@ -81,13 +77,7 @@ def measure(
         if mode == "auto":
             mode = "overlapped" if overlapped(None, device) else "sync"
         runner = RacingRunner(
-            env,
-            cfg,
-            log_dir=None,
-            device=device,
-            threads=args.threads,
-            sync=mode == "sync",
-            stagger=collect_mode == "staggered",
+            env, cfg, log_dir=None, device=device, threads=args.threads, sync=mode == "sync"
         )
         runner.start()
         wall = collect = update = staleness = 0.0
@@ -116,7 +106,6 @@ def measure(
             "device": device,
             "workers": workers,
             "mode": mode,
-            "collect_mode": "staggered" if runner.staggered else "lock-step",
             "threads": "/".join(map(str, runner.threads)),
             "races": env.num_races,
             "preset": preset,
@@ -154,12 +143,6 @@ def main() -> None:
         help="comma-separated: sync,overlapped (default: train's, overlapped on a GPU only)",
     )
     parser.add_argument(
-        "--collect",
-        default="staggered",
-        help="comma-separated: staggered,lock-step (default: train's, staggered; one or no "
-        "worker collects in lock-step)",
-    )
-    parser.add_argument(
         "--grow",
         choices=("auto", "on", "off"),
         default="auto",
@@ -179,27 +162,25 @@ def main() -> None:
     args = parser.parse_args()
     hp = Hyperparameters.load(args.hyperparameters) if args.hyperparameters else None
     rows = [
-        measure(args, device, int(w), critic, hp or Hyperparameters(), mode, collect_mode)
+        measure(args, device, int(w), critic, hp or Hyperparameters(), mode)
         for device in args.device.split(",")
         for w in args.workers.split(",")
         for mode in args.mode.split(",")
-        for collect_mode in args.collect.split(",")
         for critic in args.critic.split(",")
     ]
     columns = (
-        "device", "workers", "mode", "collection", "threads", "races", "preset", "critic",
-        "samples/it", "minibatches/it", "samples/s", "collect s/it", "update s/it", "workers wait",
+        "device", "workers", "mode", "threads", "races", "preset", "critic", "samples/it",
+        "minibatches/it", "samples/s", "collect s/it", "update s/it", "workers wait",
         "update waits", "|ratio-1|", "value loss",
     )  # fmt: skip
     table = ResultTable(
-        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrllrrllrrrrrrrrr"
+        f"training cost: {args.sensors}, {args.iterations} iterations", columns, "lrlrrllrrrrrrrrr"
     )
     for r in rows:
         table.add_row(
             str(r["device"]),
             str(r["workers"]),
             str(r["mode"]),
-            str(r["collect_mode"]),
             r["threads"],
             str(r["races"]),
             str(r["preset"]),
