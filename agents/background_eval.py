@@ -2,7 +2,7 @@
 
 The trainer hands over the actor's weights after an evaluated iteration and takes the
 race's result one iteration later (:class:`agents.train.Trainer`); the process races one
-set of weights at a time, with one torch thread, in the run's evaluation race against its
+set of weights at a time, with one torch thread, in the run's evaluation races against its
 evaluation opponent, as an evaluation in the trainer's own process would.
 """
 
@@ -21,12 +21,12 @@ from arena.race import RaceResult
 
 
 def _serve(conn: Any, run: Run) -> None:
-    """The evaluation process: race every set of actor weights received until told to stop
-    (None)."""
+    """The evaluation process: race every set of actor weights received in the run's
+    evaluation races until told to stop (None)."""
     ignore_stop_signals()  # the trainer handles them and closes this process
     torch.set_num_threads(1)
     try:
-        config = run.evaluation_config()
+        configs = run.evaluation_configs()
         reward = run.reward
         opponent = evaluate.run_opponent(run.settings)
     except Exception:
@@ -36,20 +36,21 @@ def _serve(conn: Any, run: Run) -> None:
         try:
             actor = run.actor(checkpoint={"actor_state_dict": weights})
             policy = evaluate.TorchPolicy(actor, run.settings.discrete)
-            race = evaluate.evaluate_policy(
-                config, policy, reward_function=reward, opponent=opponent
-            )
-            conn.send(("ok", race))
+            races = [
+                evaluate.evaluate_policy(c, policy, reward_function=reward, opponent=opponent)
+                for c in configs
+            ]
+            conn.send(("ok", races))
         except Exception:
             conn.send(("error", traceback.format_exc(limit=3)))
 
 
 class BackgroundEvaluator:
-    """A spawned process that races a run's actor weights in its evaluation race, one set
+    """A spawned process that races a run's actor weights in its evaluation races, one set
     at a time.
 
     ``submit`` hands it the actor's weights (copied, so training may change them at once);
-    ``result`` waits for that race. The stop signals are ignored there: the trainer
+    ``result`` waits for those races. The stop signals are ignored there: the trainer
     handles them and calls ``close``.
     """
 
@@ -65,8 +66,9 @@ class BackgroundEvaluator:
         self._conn.send({k: v.detach().cpu().clone() for k, v in actor.state_dict().items()})
         self._busy = True
 
-    def result(self) -> RaceResult:
-        """The submitted race's result, once it has run."""
+    def result(self) -> list[RaceResult]:
+        """The submitted evaluation's races (:meth:`agents.run.Run.evaluation_configs`),
+        once they have run."""
         if not self._busy:
             raise RuntimeError("no evaluation was submitted")
         try:

@@ -206,7 +206,7 @@ def _train(trainer: Any) -> None:
             status = f"it {stats.iteration}  reward {stats.mean_reward:.1f}  "
             status += f"progress {stats.mean_progress:.0f}%"
             if stats.eval is not None:
-                status += f"  eval {stats.eval.progress:.0f}%"
+                status += "  eval " + "/".join(f"{r.progress:.0f}%" for r in stats.eval.races)
             if settings.iterations:
                 progress.update(task, advance=1, status=status)
             else:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -174,6 +174,12 @@ class EvalSummary:
     crashes: int
     resets: int
     status: str
+    also: tuple[EvalSummary, ...] = ()  # the same evaluation's races on further tracks
+
+    @property
+    def races(self) -> tuple[EvalSummary, ...]:
+        """The evaluation's races: this one, then those on further tracks."""
+        return (self, *self.also)
 
     @property
     def pace_lap(self) -> float | None:
@@ -185,10 +191,17 @@ class EvalSummary:
 
     @property
     def score(self) -> tuple[float, float, float]:
-        """Order of merit, higher is better: progress, then fewer off-tracks and crashes,
-        then an earlier finish."""
-        finish = self.total_time if self.total_time is not None else math.inf
-        return (self.progress, -float(self.off_track + self.crashes), -finish)
+        """Order of merit over the evaluation's races, higher is better: mean progress,
+        then fewer off-tracks and crashes, then an earlier finish (both summed)."""
+        races = self.races
+        progress = sum(r.progress for r in races) / len(races)
+        incidents = sum(r.off_track + r.crashes for r in races)
+        finish = sum(math.inf if r.total_time is None else r.total_time for r in races)
+        return (progress, -float(incidents), -finish)
+
+    def clean(self, laps: int) -> bool:
+        """Whether every race of the evaluation ran ``laps`` laps without leaving the track."""
+        return all(r.laps >= laps and r.off_track == 0 for r in self.races)
 
 
 def summary(result: RaceResult) -> EvalSummary:
@@ -206,6 +219,13 @@ def summary(result: RaceResult) -> EvalSummary:
         resets=car.reset_count,
         status=car.status,
     )
+
+
+def evaluation_summary(races: list[RaceResult]) -> EvalSummary:
+    """The headline numbers of an evaluation's first race, with its further races'
+    (:attr:`EvalSummary.also`)."""
+    first, *others = races
+    return replace(summary(first), also=tuple(summary(race) for race in others))
 
 
 def results_table(result: RaceResult) -> Table:

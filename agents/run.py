@@ -160,6 +160,13 @@ class Run:
             sensors=s.sensors, action_space=s.action_space, stack_size=self.stack_size, **race
         )
 
+    def evaluation_configs(self) -> list[RaceConfig]:
+        """The races of one evaluation: :meth:`evaluation_config`'s on ``--track``, then,
+        with ``--eval-also-tracks``, the same race on each ``--also-tracks`` track."""
+        s = self.settings
+        others = s.also_tracks if s.eval_also_tracks else ()
+        return [self.evaluation_config(), *(self.evaluation_config(track=t) for t in others)]
+
     def checkpoints(self) -> list[dict[str, Any]]:
         """What each checkpoint the run keeps holds: its name (:data:`CHECKPOINTS`), what
         it is the best by, the iteration and training time it was taken at, and for an

@@ -59,7 +59,8 @@ class TrainSettings(BaseModel):
     also_tracks: tuple[str, ...] = Field(
         (),
         description="Further tracks the training races run on (comma-separated): the races "
-        "take --track and these in turn, at least one race each; evaluations stay on --track.",
+        "take --track and these in turn, at least one race each; evaluations stay on --track "
+        "unless --eval-also-tracks.",
     )
     race_type: RaceType = Field("time_trial", description=" | ".join(RACE_TYPES))
     boxes: int | None = Field(
@@ -162,6 +163,12 @@ class TrainSettings(BaseModel):
         5, description="Evaluate every N iterations (and after the iteration that ends the budget)."
     )
     eval_laps: int = Field(3, description="Laps of each evaluation race.")
+    eval_also_tracks: bool = Field(
+        False,
+        description="Each evaluation also races every --also-tracks track, and the run's "
+        "best model is the best over all of its races (metrics.csv's evaluation columns "
+        "stay --track's).",
+    )
     eval_time_limit: float = Field(120.0, description="Simulated seconds an evaluation may take.")
     stop_on_clean_eval: bool = Field(
         False, description="Stop at the first evaluation with every lap and no off-track."

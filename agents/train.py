@@ -528,22 +528,24 @@ class Trainer:
         return self.writes_run_folder and (every or last)
 
     def _evaluate(self, runner: RacingRunner) -> EvalSummary:
-        """Race the greedy policy in this process (race mode; head to model: against the
-        run's first ``--opponent``); write the evaluation simtrace."""
+        """Race the greedy policy in this process in the run's evaluation races (race
+        mode; head to model: against the run's first ``--opponent``); write the first
+        race's simtrace."""
         policy = evaluate.TorchPolicy(runner.alg.get_policy(), self.settings.discrete)
-        race = evaluate.evaluate_policy(
-            self.target.evaluation_config(),
-            policy,
-            reward_function=self.target.reward,
-            opponent=self.eval_opponent,
-        )
+        races = [
+            evaluate.evaluate_policy(
+                config, policy, reward_function=self.target.reward, opponent=self.eval_opponent
+            )
+            for config in self.target.evaluation_configs()
+        ]
         runner.alg.train_mode()
-        return self._summarize(race)
+        return self._summarize(races)
 
-    def _summarize(self, race: RaceResult) -> EvalSummary:
-        """Write an evaluation's simtrace and laps; its headline numbers."""
-        evaluate.write_evaluation(self.run_dir, race, training_log=self.dr_metrics)
-        return evaluate.summary(race)
+    def _summarize(self, races: list[RaceResult]) -> EvalSummary:
+        """Write the simtrace and laps of an evaluation's first race (on ``--track``); the
+        headline numbers of all its races."""
+        evaluate.write_evaluation(self.run_dir, races[0], training_log=self.dr_metrics)
+        return evaluate.evaluation_summary(races)
 
     def _record(self, result: TrainResult, stats: IterationStats) -> None:
         """Count the iteration in ``result``, with its evaluation if it had one."""
@@ -552,8 +554,7 @@ class Trainer:
         if stats.eval is None:
             return
         result.evaluations.append(stats)
-        clean = stats.eval.laps >= self.settings.eval_laps and stats.eval.off_track == 0
-        if clean and result.first_clean_eval_s is None:
+        if stats.eval.clean(self.settings.eval_laps) and result.first_clean_eval_s is None:
             result.first_clean_eval_s = stats.elapsed_s
 
     # -------------------------------------------------------------- outputs

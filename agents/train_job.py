@@ -58,6 +58,7 @@ JOB_OPTIONS = (
     "seed",
     "eval_every",
     "eval_time_limit",
+    "eval_also_tracks",
     "selfplay",
 )
 """The ``train`` options a job may set; the trainer decides workers, threads and device,

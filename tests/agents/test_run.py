@@ -29,6 +29,16 @@ def test_a_written_run_loads_back_with_its_settings_and_hyperparameters(tmp_path
     assert run.evaluation_config(laps=1, track="beginner_loop").track == "beginner_loop"
 
 
+def test_evaluations_race_the_further_tracks_only_when_asked(tmp_path):
+    also = {"track": "slipstream_speedway", "also_tracks": ("grand_tour", "beginner_loop")}
+    alone = Run(tmp_path / "a", _settings(**also), Hyperparameters())
+    assert [c.track for c in alone.evaluation_configs()] == ["slipstream_speedway"]
+    every = Run(tmp_path / "b", _settings(eval_also_tracks=True, seed=4, **also), Hyperparameters())
+    configs = every.evaluation_configs()
+    assert [c.track for c in configs] == ["slipstream_speedway", "grand_tour", "beginner_loop"]
+    assert {(c.seed, c.laps, c.race_type) for c in configs} == {(4, 3, "time_trial")}
+
+
 def test_a_folder_without_a_run_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="holds no training run"):
         Run.load(tmp_path / "nothing")

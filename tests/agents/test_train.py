@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import zipfile
 from copy import deepcopy
+from dataclasses import replace
 from pathlib import Path
 
 import onnx
@@ -320,6 +321,21 @@ def _eval(
 def test_an_evaluation_is_ranked_by_progress_then_incidents_then_finish_time():
     ranked = [_eval(50.0), _eval(100.0, 2, 30.0), _eval(100.0, 0, 40.0), _eval(100.0, 0, 35.0)]
     assert sorted(ranked, key=lambda e: e.score) == ranked
+
+
+def test_an_evaluation_on_several_tracks_is_ranked_over_all_of_its_races():
+    """--eval-also-tracks: progress is the races' mean, incidents and finish times add up;
+    clean only if every race is."""
+    fast_here = replace(_eval(100.0, 0, 30.0), also=(_eval(100.0, 1, 50.0),))
+    clean_both = replace(_eval(100.0, 0, 32.0), also=(_eval(100.0, 0, 52.0),))
+    unfinished = replace(_eval(100.0, 0, 20.0), also=(_eval(50.0),))
+    assert sorted([clean_both, fast_here, unfinished], key=lambda e: e.score) == [
+        unfinished,
+        fast_here,
+        clean_both,
+    ]
+    assert unfinished.score[0] == 75.0 and clean_both.score == (100.0, -0.0, -84.0)
+    assert clean_both.clean(3) and not fast_here.clean(3) and not unfinished.clean(3)
 
 
 def test_the_packed_model_is_the_best_evaluation_s_and_resume_keeps_it(tmp_path, monkeypatch):

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -157,18 +158,27 @@ def _evaluations(run: Path) -> tuple[list[dict], list[list[dict]]]:
 def test_evaluations_in_a_process_of_their_own_race_each_iteration_s_weights(tmp_path):
     """--background-eval: an evaluation races in a process of its own while the next
     iteration trains; it races the weights of the iteration it belongs to, as an evaluation
-    in the trainer's process does, and its process ends with the run."""
+    in the trainer's process does, on every track with --eval-also-tracks, and its process
+    ends with the run."""
     before = _workers(os.getpid())
     space = parse_action_space_spec("continuous:-30:30:0.5:2")  # any change of weights shows
     settings = {"action_space": space, "iterations": 3, "eval_every": 1, "eval_time_limit": 8.0}
+    settings |= {"also_tracks": ("slipstream_speedway",), "eval_also_tracks": True}
+    summaries = {}
     for background in (False, True):
         run = tmp_path / str(background)
-        Trainer(_settings(workers=2, background_eval=background, **settings), run, TINY).run()
+        summaries[background] = seen = []
+        Trainer(_settings(workers=2, background_eval=background, **settings), run, TINY).run(
+            lambda stats, seen=seen: seen.append(stats.eval)
+        )
     (local, local_traces) = _evaluations(tmp_path / "False")
     background = _evaluations(tmp_path / "True")
     assert all(row["eval_progress"] for row in local) and len(local) == 3
     assert len({str(trace) for trace in local_traces}) == 3  # each iteration drives its own way
     assert (local, local_traces) == background
+    assert summaries[False] == summaries[True] and len(summaries[True]) == 3
+    for evaluation in summaries[True]:  # beginner_loop, then the speedway: not the same race
+        assert len(evaluation.races) == 2 and evaluation.also[0] != replace(evaluation, also=())
     for name in ("best", "last"):
         a, b = (torch.load(tmp_path / w / "checkpoints" / f"{name}.pt") for w in ("False", "True"))
         assert a["iteration"] == b["iteration"]

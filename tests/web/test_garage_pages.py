@@ -24,6 +24,8 @@ OPTIONS = {
     "race_type": "time_trial",
     "sensors": "camera",
     "action_space": "console:20:3:1.2:2",
+    "also_tracks": "grand_tour",
+    "eval_also_tracks": True,
 }
 EDITOR = "document.querySelector('.CodeMirror').CodeMirror"
 
@@ -135,6 +137,10 @@ def test_the_garage_lists_the_racers_jobs_and_models_and_acts_on_them(
     options = page.evaluate("() => Create.jobBody(formState())")["options"]
     assert options["track"] == "slipstream_speedway"
     assert options["also_tracks"] == "hairpin_hollow,grand_tour"  # the catalogue's order
+    assert "eval_also_tracks" not in options
+    page.check("#eval-also-tracks")
+    options = page.evaluate("() => Create.jobBody(formState())")["options"]
+    assert options["eval_also_tracks"] is True
     page.click("label[for=track-grand_tour]")
     assert page.is_disabled("#also-track-grand_tour")
     assert not page.is_checked("#also-track-grand_tour")

@@ -26,6 +26,7 @@ const Create = {
     if (form.anchor) body.options.anchor = "pursuit";
     if (form.anchor && form.anchorWeight !== 1) body.options.anchor_weight = form.anchorWeight;
     if (form.alsoTracks.length) body.options.also_tracks = form.alsoTracks.join(",");
+    if (form.alsoTracks.length && form.evalAlsoTracks) body.options.eval_also_tracks = true;
     if (form.cloneOf) body.clone_of = form.cloneOf;
     return body;
   },
@@ -214,6 +215,7 @@ function formState() {
     description: $("model-description").value,
     track: checked("track"),
     alsoTracks: Array.from(document.querySelectorAll('input[name="also_track"]:checked'), (n) => n.value),
+    evalAlsoTracks: $("eval-also-tracks").checked,
     direction: $("direction").value,
     raceType: checked("race_type"),
     raceSettings: raceSettingValues(),
@@ -279,6 +281,7 @@ function fillFrom(job) {
   updateTrackDirection();
   if (o.direction) $("direction").value = o.direction;
   for (const name of String(o.also_tracks || "").split(",")) if (name) setChecked("also_track", name);
+  $("eval-also-tracks").checked = Boolean(o.eval_also_tracks);
   if (job.description) $("model-description").value = job.description;
   if (o.race_type) setChecked("race_type", o.race_type);
   updateRaceSettings(o);
