@@ -86,6 +86,11 @@ def _rules(track: str, laps: int, seed: int, race_type: str) -> dict[str, Any]:
     }
 
 
+def real_width_tracks() -> list[str]:
+    """The built-in tracks as wide as DeepRacer's (1.07 m)."""
+    return [n for n in builtin_names() if get_track(n).width >= DEEPRACER_WIDTH_M - 0.01]
+
+
 SOLO_RACES = 5
 
 
@@ -241,8 +246,7 @@ def main() -> None:
     parser.add_argument(
         "--field", type=Path, nargs="*", help="other model files (default: the other samples)"
     )
-    real_width = [n for n in builtin_names() if get_track(n).width >= DEEPRACER_WIDTH_M - 0.01]
-    parser.add_argument("--tracks", default=",".join(real_width))
+    parser.add_argument("--tracks", default=",".join(real_width_tracks()))
     parser.add_argument("--races", type=int, default=20, help="seeded races per rival")
     parser.add_argument("--laps", type=int, default=3)
     add_record_option(parser)
