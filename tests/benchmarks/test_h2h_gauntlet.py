@@ -1,14 +1,8 @@
-"""The head-to-head gauntlet's field for a model on a discrete action space.
-
-``benchmarks/`` is a folder of scripts, not a package, so the gauntlet is loaded from its file.
-"""
+"""The head-to-head gauntlet's field for a model on a discrete action space."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -16,22 +10,14 @@ import pytest
 from agents.action_spaces import console_action_space
 from arena.config import CarConfig
 from arena.pursuit import PurePursuitPolicy
+from tests.benchmarks.scripts import benchmark_script
 from tracks.catalog import get_track
-
-BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 
 
 @pytest.fixture(scope="module")
 def gauntlet() -> Iterator[ModuleType]:
-    """``benchmarks/h2h_gauntlet.py`` as a module (it imports its harness by name)."""
-    with pytest.MonkeyPatch.context() as patch:
-        patch.syspath_prepend(str(BENCHMARKS))
-        path = BENCHMARKS / "h2h_gauntlet.py"
-        spec = importlib.util.spec_from_file_location("benchmarks_h2h_gauntlet", path)
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        patch.setitem(sys.modules, spec.name, module)  # dataclasses look their module up
-        spec.loader.exec_module(module)
+    """``benchmarks/h2h_gauntlet.py`` as a module."""
+    with benchmark_script("h2h_gauntlet") as module:
         yield module
 
 
