@@ -6,7 +6,6 @@ import argparse
 import subprocess
 import sys
 from collections.abc import Iterator
-from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -42,7 +41,7 @@ def test_a_driver_is_compared_with_the_teacher_on_the_races_both_finished(
     assert laps.against({0: None}, teacher) == ["-", "-"]
 
 
-def test_a_model_and_the_teacher_lap_a_track(tmp_path: Path) -> None:
+def test_a_model_and_the_teacher_lap_a_track() -> None:
     command = [sys.executable, str(BENCHMARKS / "time_trial_laps.py"), "--model", str(SAMPLE)]
     command += ["--tracks", "slipstream_speedway", "--seeds", "0", "--laps", "1", "--no-record"]
     out = subprocess.run(command, capture_output=True, text=True, check=True, cwd=ROOT).stdout
