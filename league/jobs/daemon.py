@@ -8,12 +8,11 @@ import logging
 import os
 import signal
 import socket
-import time
 from collections.abc import Callable
 from typing import Any
 
 from league.db import make_engine, make_session_factory
-from league.jobs.queue import DB_ERRORS, Backoff
+from league.jobs.queue import DB_ERRORS, Backoff, sleep_unless_stopped
 from league.settings import Settings
 from league.store import open_storage
 
@@ -78,6 +77,4 @@ class LeasingDaemon:
         self._sleep(delay)
 
     def _sleep(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while not self.stopping and time.monotonic() < end:
-            time.sleep(min(0.2, end - time.monotonic()))
+        sleep_unless_stopped(seconds, lambda: self.stopping)

@@ -18,8 +18,9 @@ through :func:`claim_done`.
 from __future__ import annotations
 
 import random
+import time
 import uuid
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
@@ -60,6 +61,16 @@ class Backoff:
     def reset(self) -> None:
         """Back to the shortest wait after a success."""
         self.delay = 0.0
+
+
+def sleep_unless_stopped(seconds: float, stopping: Callable[[], bool], tick: float = 0.2) -> None:
+    """Sleep ``seconds``, waking every ``tick`` to leave early once ``stopping()`` is true."""
+    end = time.monotonic() + seconds
+    while not stopping():
+        left = end - time.monotonic()
+        if left <= 0.0:  # checked after reading the clock: a late wake-up never sleeps < 0
+            return
+        time.sleep(min(tick, left))
 
 
 def evaluation_jobs(event_id: int, entry_id: int, seeds: Iterable[int]) -> list[dict[str, Any]]:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import logging
 import random
 import signal
-import time
 from collections.abc import Collection
 from datetime import datetime, timedelta
 
@@ -23,7 +22,14 @@ from sqlalchemy.orm import Session
 
 from league.db import make_engine, make_session_factory
 from league.jobs.matchmaking import Candidate, pairings, plan_round
-from league.jobs.queue import DB_ERRORS, Backoff, evaluation_jobs, expire_leases, insert_jobs
+from league.jobs.queue import (
+    DB_ERRORS,
+    Backoff,
+    evaluation_jobs,
+    expire_leases,
+    insert_jobs,
+    sleep_unless_stopped,
+)
 from league.models import Entry, Event, Job, Rating, utcnow
 from league.ranking import initial_skill, leaderboard, standing_row
 from league.settings import Settings
@@ -237,9 +243,7 @@ class Scheduler:
                 log.warning(
                     "database unavailable (%s); retrying in %.1f s", type(exc).__name__, wait
                 )
-            end = time.monotonic() + wait
-            while not self.stopping and time.monotonic() < end:
-                time.sleep(min(0.2, end - time.monotonic()))
+            sleep_unless_stopped(wait, lambda: self.stopping)
         self.engine.dispose()
         log.info("scheduler stopped")
 
